@@ -1,0 +1,1 @@
+"""Recorder, player, inspector and analyser of rosbag2 MCAP bags."""

@@ -1,0 +1,1 @@
+"""Launcher, parameter tool and the rwpend command line."""

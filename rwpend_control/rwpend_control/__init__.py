@@ -1,0 +1,1 @@
+"""Control laws, gain design and switching of the book, and the controller node."""

@@ -1,0 +1,1 @@
+"""Velocity filters, observers and friction estimation of the book, and the estimator node."""

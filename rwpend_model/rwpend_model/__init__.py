@@ -1,0 +1,1 @@
+"""rwpend pure core: rig parameters, plant model, encoders (no rclpy)."""

@@ -1,0 +1,1 @@
+"""Simulated Reaction Wheel Pendulum node: publishes quantized encoder counts like the rig."""

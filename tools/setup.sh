@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Idempotent set-up of the rwpend workspace (called by `make setup`).
+#   1. .venv with Python 3.11 and the pinned wheels of requirements.txt
+#   2. rwpend_msgs built with cmake (ament_cmake + rosidl) and installed into the venv prefix,
+#      like the ROS wheels themselves, so no sourcing is ever needed
+#   3. the ament_python packages installed editable into the venv
+# Each step is skipped when its inputs did not change (stamp files in .venv/).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+VENV=$ROOT/.venv
+PY=${PYTHON:-python3.11}
+command -v "$PY" >/dev/null 2>&1 || PY=python3
+PYPKGS="rwpend_model rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_bringup"
+
+need_apt=""
+command -v cmake >/dev/null 2>&1 || need_apt="$need_apt cmake"
+command -v g++ >/dev/null 2>&1 || need_apt="$need_apt g++"
+command -v make >/dev/null 2>&1 || need_apt="$need_apt make"
+"$PY" -c "import ensurepip, venv" >/dev/null 2>&1 || need_apt="$need_apt python3-venv"
+if [ -n "$need_apt" ]; then
+  echo "setup: installing system packages:$need_apt"
+  if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO=sudo; fi
+  $SUDO apt-get update -qq && $SUDO apt-get install -y -qq $need_apt
+fi
+
+"$PY" -c 'import sys; assert sys.version_info[:2] == (3, 11), "rwpend needs Python 3.11 (the ROS 2 Jazzy wheels are cp311)"'
+
+stamp_ok() {  # stamp_ok STAMP FILE... : stamp newer than every input?
+  local s=$1; shift
+  [ -f "$s" ] || return 1
+  [ -z "$(find "$@" -newer "$s" -print -quit 2>/dev/null)" ]
+}
+
+SECONDS=0
+if [ ! -x "$VENV/bin/python" ]; then
+  echo "setup: creating $VENV"
+  "$PY" -m venv "$VENV"
+fi
+if ! stamp_ok "$VENV/.stamp-deps" requirements.txt tools/setup.sh; then
+  echo "setup: installing pinned wheels (requirements.txt)"
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check --upgrade "pip==24.3.1"
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check -r requirements.txt
+  touch "$VENV/.stamp-deps"
+fi
+
+export VIRTUAL_ENV=$VENV PATH=$VENV/bin:$PATH AMENT_PREFIX_PATH=$VENV CMAKE_PREFIX_PATH=$VENV
+if ! stamp_ok "$VENV/.stamp-msgs" rwpend_msgs "$VENV/.stamp-deps"; then
+  echo "setup: building rwpend_msgs (cmake, ament_cmake + rosidl) into the venv"
+  mkdir -p build
+  if ! { cmake -S rwpend_msgs -B build/rwpend_msgs -DCMAKE_INSTALL_PREFIX="$VENV" \
+           -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
+         && cmake --build build/rwpend_msgs -j"$(nproc)" \
+         && cmake --install build/rwpend_msgs; } > build/rwpend_msgs.log 2>&1; then
+    tail -40 build/rwpend_msgs.log
+    echo "setup: rwpend_msgs build FAILED (full log: build/rwpend_msgs.log)" >&2
+    exit 1
+  fi
+  touch "$VENV/.stamp-msgs"
+fi
+
+setup_files=""
+for p in $PYPKGS; do [ -f "$p/setup.py" ] && setup_files="$setup_files $p/setup.py $p/package.xml"; done
+if ! stamp_ok "$VENV/.stamp-py" $setup_files "$VENV/.stamp-deps"; then
+  echo "setup: installing the Python packages (editable)"
+  args=""
+  for p in $PYPKGS; do [ -f "$p/setup.py" ] && args="$args -e ./$p"; done
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation --config-settings editable_mode=compat $args
+  touch "$VENV/.stamp-py"
+fi
+"$VENV/bin/python" -c "import rclpy, rwpend_msgs.msg" \
+  || { echo "setup: the environment does not import rclpy/rwpend_msgs" >&2; exit 1; }
+echo "setup: ready (${SECONDS} s)"
