@@ -10,13 +10,13 @@ demo: setup
 	@./rwpend demo
 
 test: setup
-	@$(PY) -m pytest
+	@./rwpend exec python -m pytest
 
 test-unit: setup
-	@$(PY) -m pytest -m "not system"
+	@./rwpend exec python -m pytest -m "not system"
 
 test-system: setup
-	@$(PY) -m pytest -m system
+	@./rwpend exec python -m pytest -m system
 
 bench: setup
 	@./rwpend bench

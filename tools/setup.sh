@@ -11,7 +11,7 @@ ROOT=$PWD
 VENV=$ROOT/.venv
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
-PYPKGS="rwpend_model rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_bringup"
+PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_bringup"
 
 need_apt=""
 command -v cmake >/dev/null 2>&1 || need_apt="$need_apt cmake"

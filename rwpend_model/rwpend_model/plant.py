@@ -1,0 +1,237 @@
+"""Nonlinear model of the Reaction Wheel Pendulum, as the simulator and the device emulator run it.
+
+Equations (2.11) in the normalized form (2.15), theta measured from hanging (Section 2.1):
+
+    theta''   = -a sin(theta) - b_p (tau - F) + b_p d - c_p theta'
+    theta_r'' =  b_r (tau - F)
+
+* tau: motor torque actually applied, in control units (1 unit = k_u Nm, (2.14)):
+  the command u held over the sample (zero-order hold), saturated to |u| <= u_max,
+  optionally quantized to the PWM duty resolution (Section 2.5), filtered by the current
+  loop's first-order lag T_e = 0.5 ms (Section 2.4) and cut to zero by the back-EMF limit
+  (2.13) when the rotor turns faster than V_max/k_m relative to the pendulum in the
+  direction of the torque.
+* F: rotor friction in control units as a function of the relative speed
+  w_rel = theta_r' - theta' (3.17, ERRATA E46), with stiction: while the rotor turns with
+  the pendulum (w_rel = 0) it stays stuck as long as the friction needed to hold it is below
+  the breakaway level (the free swing of Experiment 1, Fig. 2.2).  Stuck, both bodies move as
+  one: (J + J_r) theta'' = -m g l sin(theta) + ..., i.e. frequency omega_p' (Section 2.3).
+* c_p: viscous pendulum-axis friction, 1 / (energy time constant), Fig. 2.3 (~1 min).
+* d: external torque on the pendulum in control units, entering as +b_p d (ERRATA E20).
+
+Integration: classical Runge-Kutta 4 on sub-steps of at most 0.2 ms (the motor lag is the
+exact exponential response inside a sample), with event handling of the stick/slip
+transitions at the sub-step boundaries.  Energy drift with friction and input off:
+< 1e-9 relative over 60 s (tested).
+
+Encoders (Section 3.1): round(theta / delta), round((theta_r - theta) / delta),
+delta = 2 pi / 4000; the simulated encoders were zeroed with the pendulum hanging at rest,
+whatever the initial state, so counts are absolute angles from hanging.
+
+Pure Python (math only, no numpy in the per-sample path): no rclpy.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .rig import Rig
+
+#: Longest integration sub-step (s).
+MAX_SUBSTEP = 0.0002
+
+
+@dataclass
+class PlantState:
+    """Ground truth of the simulated rig (angles from hanging, rad and rad/s; torques in units)."""
+
+    theta: float = 0.0
+    theta_dot: float = 0.0
+    wheel_angle: float = 0.0
+    wheel_rate: float = 0.0
+    torque: float = 0.0        # applied motor torque (control units), after lag and cut-off
+    friction: float = 0.0      # rotor friction acting (control units)
+    stuck: bool = False        # rotor stuck to the pendulum
+
+
+class Plant:
+    """The reaction wheel pendulum (2.11)/(2.15) with friction, amplifier and encoders.
+
+    ``step(u)`` advances one sample period h with u held; ``counts()`` reads the encoders.
+    """
+
+    def __init__(self, rig: Rig, *, theta: float = 0.0, theta_dot: float = 0.0,
+                 wheel_angle: float = 0.0, wheel_rate: float = 0.0, friction: bool = True,
+                 pendulum_friction: bool | None = None, motor_lag: bool = True,
+                 pwm: bool = True, back_emf: bool = True) -> None:
+        for name, v in (('theta', theta), ('theta_dot', theta_dot), ('wheel_angle', wheel_angle),
+                        ('wheel_rate', wheel_rate)):
+            if not math.isfinite(v):
+                raise ValueError(f'initial {name} must be finite, got {v!r}')
+        self.rig = rig
+        self.friction_on = bool(friction)
+        self.pendulum_friction_on = self.friction_on if pendulum_friction is None else bool(pendulum_friction)
+        self.motor_lag = bool(motor_lag) and rig.motor_time_constant > 0
+        self.pwm = bool(pwm) and rig.pwm_steps > 0
+        self.back_emf = bool(back_emf)
+        self.h = rig.sample_period
+        n = max(1, math.ceil(self.h / MAX_SUBSTEP - 1e-9))
+        self._n = n
+        self._dt = self.h / n
+        # model constants
+        self._a = rig.a
+        self._bp = rig.b_p
+        self._br = rig.b_r
+        self._cp = rig.pendulum_damping if self.pendulum_friction_on else 0.0
+        self._stuck_gain = rig.b_r / (rig.b_r + rig.b_p)     # J / (J + J_r)
+        self._wmax = rig.omega_max
+        self._umax = rig.u_max
+        self._pwm_q = rig.u_max / rig.pwm_steps if self.pwm else 0.0
+        self._te = rig.motor_time_constant if self.motor_lag else 0.0
+        self._cpos, self._vpos = rig.friction_coulomb_pos, rig.friction_viscous_pos
+        self._cneg, self._vneg = rig.friction_coulomb_neg, rig.friction_viscous_neg
+        self._fbreak = rig.friction_breakaway
+        self._delta = rig.count_angle
+        # state
+        self._x = [float(theta), float(theta_dot), float(wheel_angle), float(wheel_rate)]
+        self._tau = 0.0
+        self._stuck = self.friction_on and wheel_rate == theta_dot
+        self._friction = 0.0
+        self.disturbance = 0.0
+        self.t = 0.0
+        self.u_held = 0.0
+
+    # ------------------------------------------------------------------ inputs
+    def quantize_command(self, u: float) -> float:
+        """The command the amplifier realises: 0 if not finite, saturated, PWM-quantized (2.14)."""
+        if not math.isfinite(u):
+            return 0.0
+        umax = self._umax
+        u = umax if u > umax else (-umax if u < -umax else u)
+        if self._pwm_q:
+            u = math.floor(u / self._pwm_q + 0.5) * self._pwm_q
+        return u
+
+    def tap(self, dv: float) -> None:
+        """Impulsive tap on the pendulum: theta' jumps by dv (rad/s); the rotor slips."""
+        if not math.isfinite(dv):
+            raise ValueError(f'tap must be finite, got {dv!r}')
+        self._x[1] += dv
+        if dv != 0.0:
+            self._stuck = False
+
+    # ------------------------------------------------------------------ model
+    def _kinetic_friction(self, w: float) -> float:
+        if w > 0.0:
+            return self._cpos + self._vpos * w
+        if w < 0.0:
+            return -self._cneg + self._vneg * w
+        return 0.0
+
+    def _torque_available(self, tau: float, w: float) -> float:
+        """Back-EMF cut-off (2.13): no torque in the direction of motion beyond V_max/k."""
+        if self.back_emf and ((tau > 0.0 and w > self._wmax) or (tau < 0.0 and w < -self._wmax)):
+            return 0.0
+        return tau
+
+    def _deriv(self, th, thd, thrd, tau, stuck):
+        """(theta'', theta_r'', F) for the given state and applied torque."""
+        w = thrd - thd
+        tau = self._torque_available(tau, w)
+        grav = -self._a * math.sin(th) + self._bp * self.disturbance - self._cp * thd
+        if stuck:
+            acc = grav * self._stuck_gain
+            return acc, acc, tau - acc / self._br
+        f = self._kinetic_friction(w) if self.friction_on else 0.0
+        return grav - self._bp * (tau - f), self._br * (tau - f), f
+
+    def _required_friction(self, th, thd, tau):
+        """Friction (units) the bearing must supply to keep the rotor stuck."""
+        return self._deriv(th, thd, thd, tau, True)[2]
+
+    def step(self, u: float = 0.0) -> None:
+        """Advance one sample period h with the command u held (ZOH)."""
+        u = self.quantize_command(u)
+        self.u_held = u
+        dt = self._dt
+        te = self._te
+        decay = math.exp(-dt / te) if te > 0 else 0.0
+        half_decay = math.exp(-0.5 * dt / te) if te > 0 else 0.0
+        th, thd, thr, thrd = self._x
+        tau0 = self._tau
+        stuck = self._stuck
+        fb = self._fbreak
+        for _ in range(self._n):
+            # motor current lag: exact exponential response to the held command
+            tau_mid = u + (tau0 - u) * half_decay
+            tau1 = u + (tau0 - u) * decay
+            if stuck and abs(self._required_friction(th, thd, tau0)) > fb:
+                stuck = False
+            if stuck:
+                # one rigid body: integrate theta with RK4, the rotor follows
+                d = self._deriv
+                k1 = d(th, thd, thd, tau0, True)[0]
+                k2 = d(th + 0.5 * dt * thd, thd + 0.5 * dt * k1, 0.0, tau_mid, True)[0]
+                k3 = d(th + 0.5 * dt * (thd + 0.5 * dt * k1), thd + 0.5 * dt * k2, 0.0, tau_mid, True)[0]
+                k4 = d(th + dt * (thd + 0.5 * dt * k2), thd + dt * k3, 0.0, tau1, True)[0]
+                dth = dt * (thd + dt / 6.0 * (k1 + k2 + k3))
+                thd_new = thd + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+                th += dth
+                thr += dth
+                thd = thrd = thd_new
+            else:
+                d = self._deriv
+                w0 = thrd - thd
+                a1, r1, _ = d(th, thd, thrd, tau0, False)
+                a2, r2, _ = d(th + 0.5 * dt * thd, thd + 0.5 * dt * a1, thrd + 0.5 * dt * r1, tau_mid, False)
+                a3, r3, _ = d(th + 0.5 * dt * thd + 0.25 * dt * dt * a1, thd + 0.5 * dt * a2,
+                              thrd + 0.5 * dt * r2, tau_mid, False)
+                a4, r4, _ = d(th + dt * thd + 0.5 * dt * dt * a2, thd + dt * a3, thrd + dt * r3, tau1, False)
+                th += dt * (thd + dt / 6.0 * (a1 + a2 + a3))
+                thr += dt * (thrd + dt / 6.0 * (r1 + r2 + r3))
+                thd += dt / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4)
+                thrd += dt / 6.0 * (r1 + 2 * r2 + 2 * r3 + r4)
+                w1 = thrd - thd
+                if self.friction_on and (w0 == 0.0 or w1 == 0.0 or (w0 > 0.0) != (w1 > 0.0)):
+                    # relative speed crossed zero: stick if the bearing can hold the rotor
+                    if abs(self._required_friction(th, thd, tau1)) <= fb:
+                        j_ratio = self._stuck_gain             # J / (J + J_r)
+                        v = j_ratio * thd + (1.0 - j_ratio) * thrd   # momentum-conserving
+                        thd = thrd = v
+                        stuck = True
+            tau0 = tau1
+        self._x = [th, thd, thr, thrd]
+        self._tau = tau0
+        self._stuck = stuck
+        w = thrd - thd
+        tau_eff = self._torque_available(tau0, w)
+        if stuck:
+            self._friction = self._required_friction(th, thd, tau0)
+        else:
+            self._friction = self._kinetic_friction(w) if self.friction_on else 0.0
+        self._tau_eff = tau_eff
+        self.t += self.h
+
+    # ------------------------------------------------------------------ outputs
+    @property
+    def state(self) -> PlantState:
+        th, thd, thr, thrd = self._x
+        return PlantState(theta=th, theta_dot=thd, wheel_angle=thr, wheel_rate=thrd,
+                          torque=self._torque_available(self._tau, thrd - thd),
+                          friction=self._friction, stuck=self._stuck)
+
+    def counts(self) -> tuple[int, int]:
+        """Encoder readings (pendulum_counts, motor_counts) (2.1)-(2.2), rounded to a count."""
+        th, _, thr, _ = self._x
+        dl = self._delta
+        return math.floor(th / dl + 0.5), math.floor((thr - th) / dl + 0.5)
+
+    def energy(self) -> float:
+        """Scaled pendulum energy (6.2) of the true state."""
+        return self.rig.energy(self._x[0], self._x[1])
+
+    def total_energy(self) -> float:
+        """Mechanical energy of pendulum + rotor (J): (2.4) + (2.5)."""
+        th, thd, _, thrd = self._x
+        r = self.rig
+        return 0.5 * r.J * thd ** 2 + 0.5 * r.j_r * thrd ** 2 + r.mgl * (1.0 - math.cos(th))

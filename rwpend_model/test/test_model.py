@@ -1,0 +1,130 @@
+"""Unit tests of the rig parameters and the plant model (no ROS)."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from rwpend_model.plant import Plant
+from rwpend_model.rig import BOOK_G, Rig, book_rig, load_rig, read_params_file
+
+
+def test_book_values_are_derived_from_physical_data():
+    """Section 2.6 / (2.15): a, b_p, b_r, omega_p as printed (78.4, 1.08, 198, 8.856) with g = 9.91."""
+    r = book_rig()
+    assert r.g == BOOK_G
+    assert r.a == pytest.approx(78.4, abs=0.05)
+    assert r.b_p == pytest.approx(1.08, abs=0.005)
+    assert r.b_r == pytest.approx(198, abs=0.5)
+    assert r.omega_p == pytest.approx(8.856, abs=0.001)
+    assert r.omega_p ** 2 == pytest.approx(r.a)
+
+
+def test_physical_g_is_the_default():
+    """ERRATA E01: the shipped YAML has g = 9.81 and a follows from it."""
+    r = load_rig()
+    assert r.g == 9.81
+    assert r.a == pytest.approx(r.mgl / r.J)
+    assert r.a == pytest.approx(77.63, abs=0.01)
+
+
+def test_shipped_yaml_is_a_ros_params_file():
+    from rwpend_model.rig import default_rig_file
+    params = read_params_file(default_rig_file(), '/rwpend/sim')
+    assert params['rig.counts_per_rev'] == 4000
+    assert params['rig.sample_period'] == 0.001
+    assert params['rig.u_max'] == 10.0
+
+
+@pytest.mark.parametrize('change', [dict(g=-1.0), dict(j_r=0.0), dict(m_p=float('nan')),
+                                    dict(sample_period=1.0), dict(counts_per_rev=4000.5),
+                                    dict(friction_coulomb_pos=-0.1)])
+def test_invalid_rig_is_refused_with_reason(change):
+    with pytest.raises(ValueError, match='rig.' + next(iter(change))):
+        Rig().replace(**change)
+
+
+def test_unknown_rig_parameter_is_refused():
+    with pytest.raises(ValueError, match='unknown'):
+        Rig.from_params({'rig.gg': 9.81})
+
+
+def test_bad_params_file(tmp_path):
+    f = tmp_path / 'x.yaml'
+    f.write_text('just: text\n')
+    with pytest.raises(ValueError, match='ros__parameters'):
+        read_params_file(f)
+    f.write_text('[unclosed\n')
+    with pytest.raises(ValueError, match='cannot read'):
+        read_params_file(f)
+
+
+def test_energy_conserved_without_friction():
+    """RK4 on (2.15): total energy drift over 60 s of free swing (no friction, no input)."""
+    r = book_rig()
+    p = Plant(r, theta=2.0, friction=False, motor_lag=False, pwm=False)
+    e0 = p.total_energy()
+    for _ in range(60000):
+        p.step(0.0)
+    assert abs(p.total_energy() - e0) / e0 < 1e-9
+
+
+def test_small_swing_period_rotor_stuck():
+    """Free swing with the rotor stuck: omega_p' = sqrt(mgl/(J+J_r)) (Section 2.3, Experiment 1)."""
+    r = book_rig(pendulum_energy_time_constant=0.0)
+    p = Plant(r, theta=0.05)
+    crossings = []
+    prev = p.state.theta
+    for k in range(5000):
+        p.step(0.0)
+        th = p.state.theta
+        if prev > 0 >= th:
+            crossings.append((k + 1) * r.sample_period)
+        prev = th
+    period = (crossings[-1] - crossings[0]) / (len(crossings) - 1)
+    assert period == pytest.approx(2 * math.pi / r.omega_p_stuck, rel=2e-3)
+
+
+def test_wheel_acceleration_and_saturation():
+    """theta_r'' = b_r (u - F); |u| <= 10, NaN -> 0 (the amplifier realises nothing else)."""
+    r = book_rig()
+    p = Plant(r, friction=False, motor_lag=False, pwm=False, back_emf=False)
+    p.step(50.0)
+    assert p.u_held == 10.0
+    assert p.state.wheel_rate == pytest.approx(r.b_r * 10 * r.sample_period, rel=0.05)
+    assert p.quantize_command(float('nan')) == 0.0
+    assert p.quantize_command(-1e9) == -10.0
+
+
+def test_back_emf_cutoff_limits_wheel_speed():
+    r = book_rig()
+    p = Plant(r, friction=False)
+    for _ in range(10000):
+        p.step(10.0)
+    w_rel = p.state.wheel_rate - p.state.theta_dot
+    assert w_rel == pytest.approx(r.omega_max, rel=0.02)
+
+
+def test_friction_model_3_17():
+    r = book_rig()
+    assert r.friction(100.0) == pytest.approx(0.99 + 1.16)
+    assert r.friction(-100.0) == pytest.approx(-0.97 - 1.17)
+    assert r.friction(0.0) == 0.0
+
+
+def test_counts_quantize_angles():
+    r = book_rig()
+    p = Plant(r, theta=math.pi, wheel_angle=math.pi + 2 * math.pi * 10)
+    pc, mc = p.counts()
+    assert pc == 2000
+    assert mc == 40000
+
+
+def test_tap_and_invalid_initial_state():
+    p = Plant(book_rig())
+    p.tap(1.5)
+    assert p.state.theta_dot == 1.5
+    with pytest.raises(ValueError):
+        p.tap(float('inf'))
+    with pytest.raises(ValueError):
+        Plant(book_rig(), theta=float('nan'))
