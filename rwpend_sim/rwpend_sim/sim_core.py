@@ -1,0 +1,127 @@
+"""Sample-by-sample logic of the simulated rig, without ROS: command hold, timeout, disturbances.
+
+The node (sim_node.py) only moves messages and time in and out of :class:`SimCore`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from rwpend_model.plant import Plant
+from rwpend_model.rig import Rig
+
+#: Largest disturbance torque accepted by the disturb service (control units).
+MAX_DISTURBANCE = 100.0
+#: Largest tap accepted (rad/s).
+MAX_TAP = 100.0
+#: Longest torque disturbance accepted (s).
+MAX_DURATION = 3600.0
+
+
+@dataclass
+class SimCounters:
+    samples: int = 0
+    commands: int = 0            # accepted commands
+    rejected_commands: int = 0   # non-finite u, or answering a future sample
+    stale_commands: int = 0      # answering an older sample than the last accepted one
+    saturated_commands: int = 0  # |u| > u_max (applied saturated)
+    timeout_samples: int = 0     # samples integrated with u = 0 because of the command timeout
+    timeouts: int = 0            # timeout episodes
+    estop_samples: int = 0       # samples held at zero by the e-stop
+    late_commands: int = 0       # lockstep: commands that did not arrive in time
+    last_reject_reason: str = ''
+    extra: dict = field(default_factory=dict)
+
+
+class SimCore:
+    """One simulated rig: plant + amplifier command hold + command timeout + disturbances.
+
+    Per sample k: :meth:`sample` returns the encoder counts at t_k (published with seq k);
+    then :meth:`advance` integrates to t_{k+1} with the command held (the latest accepted one,
+    or 0 after ``command_timeout_samples`` samples without a fresh command, or under e-stop).
+    """
+
+    def __init__(self, rig: Rig, *, command_timeout_samples: int = 3, **plant_kwargs) -> None:
+        if int(command_timeout_samples) < 1:
+            raise ValueError('command_timeout_samples must be >= 1')
+        self.rig = rig
+        self.plant = Plant(rig, **plant_kwargs)
+        self.timeout_samples = int(command_timeout_samples)
+        self.k = 0                       # seq of the next sample to publish
+        self.u = 0.0                     # latest accepted command (before saturation)
+        self.u_seq = -1                  # seq that the latest accepted command answered
+        self.last_command_k = None       # sample index when the latest command was accepted
+        self.timed_out = False
+        self.estop = False
+        self._torque_until = -1.0
+        self.counters = SimCounters()
+
+    # ------------------------------------------------------------- inputs
+    def command(self, seq: int, u: float) -> tuple[bool, str]:
+        """Offer a MotorCommand; returns (accepted, reason when refused)."""
+        c = self.counters
+        if not isinstance(u, (int, float)) or not math.isfinite(u):
+            c.rejected_commands += 1
+            c.last_reject_reason = f'non-finite u ({u!r}) for seq {seq}'
+            return False, c.last_reject_reason
+        if seq > self.k:
+            c.rejected_commands += 1
+            c.last_reject_reason = f'command answers seq {seq}, but the newest sample is {self.k}'
+            return False, c.last_reject_reason
+        if seq <= self.u_seq:
+            c.stale_commands += 1
+            return False, f'stale command for seq {seq} (already have {self.u_seq})'
+        if abs(u) > self.rig.u_max:
+            c.saturated_commands += 1
+        self.u = float(u)
+        self.u_seq = int(seq)
+        self.last_command_k = self.k
+        c.commands += 1
+        return True, ''
+
+    def tap(self, dv: float) -> tuple[bool, str]:
+        if not math.isfinite(dv) or abs(dv) > MAX_TAP:
+            return False, f'tap must be finite and |tap| <= {MAX_TAP} rad/s, got {dv!r}'
+        self.plant.tap(dv)
+        return True, f'tapped the pendulum: theta_dot += {dv:g} rad/s'
+
+    def torque(self, d: float, duration: float) -> tuple[bool, str]:
+        if not math.isfinite(d) or abs(d) > MAX_DISTURBANCE:
+            return False, f'torque must be finite and |torque| <= {MAX_DISTURBANCE} units, got {d!r}'
+        if not math.isfinite(duration) or not 0.0 < duration <= MAX_DURATION:
+            return False, f'duration must be in (0, {MAX_DURATION}] s, got {duration!r}'
+        self.plant.disturbance = float(d)
+        self._torque_until = self.plant.t + duration
+        return True, f'torque {d:g} units on the pendulum for {duration:g} s'
+
+    # ------------------------------------------------------------- loop
+    def sample(self) -> tuple[int, int, int]:
+        """(seq, pendulum_counts, motor_counts) of the current sample t_k."""
+        pc, mc = self.plant.counts()
+        return self.k, pc, mc
+
+    def held_command(self) -> float:
+        """The command the amplifier holds over [t_k, t_k+1): 0 on timeout or e-stop."""
+        if self.estop:
+            self.counters.estop_samples += 1
+            return 0.0
+        fresh = self.last_command_k is not None and self.k - self.last_command_k < self.timeout_samples
+        if not fresh:
+            if not self.timed_out:
+                self.counters.timeouts += 1
+            self.timed_out = True
+            self.counters.timeout_samples += 1
+            return 0.0
+        self.timed_out = False
+        return self.u
+
+    def advance(self) -> float:
+        """Integrate [t_k, t_k+1) and move to sample k+1; returns the command held."""
+        u = self.held_command()
+        if self._torque_until >= 0.0 and self.plant.t >= self._torque_until - 1e-12:
+            self.plant.disturbance = 0.0
+            self._torque_until = -1.0
+        self.plant.step(u)
+        self.k += 1
+        self.counters.samples += 1
+        return u
