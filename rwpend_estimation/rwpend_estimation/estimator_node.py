@@ -1,0 +1,218 @@
+"""``estimator`` node: encoder counts -> state estimate, every sample.
+
+Subscribes ``encoders`` (EncoderCounts) and ``command`` (MotorCommand: the u used for sample k
+is the latest valid command received, saturated to |u| <= u_max); publishes for every encoder
+sample ``state`` (StateEstimate, seq and header copied from the encoder sample) and, unless
+``publish_joint_states`` is false, ``joint_states`` (sensor_msgs/JointState, joints
+``pendulum`` = theta and ``wheel`` = theta_r - theta, the wheel's angle relative to the
+pendulum, i.e. the joint coordinate of a base -> pendulum -> wheel chain).
+``~/reset`` (std_srvs/Trigger) re-zeros the encoders at the current counts.
+``/diagnostics`` once a second: estimator, samples, refused samples and commands, seq gaps.
+
+Every setting of :class:`rwpend_estimation.estimators.EstimatorConfig` is a ROS parameter of
+the same name, changeable while running: new values are validated in the on-set callback
+(refused with the reason) and applied in the post-set callback, where the new estimator
+continues from the current estimate without a jump (``switch_estimator``).
+Invalid samples (implausible jumps) and non-finite commands are counted and ignored.
+
+All algorithms live in :mod:`rwpend_estimation.estimators` (pure, no rclpy).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, fields
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
+from rwpend_ros.common import (QOS_CONTROL, QOS_STATUS, ConfigError, declare_rig, diagnostic_status,
+                               run_node)
+from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
+                                          make_estimator, switch_estimator)
+
+DESCRIPTIONS = {
+    'estimator': 'estimator: ' + ', '.join(ESTIMATORS),
+    'T': 'time constant of the filtered difference (3.3), s',
+    'omega0': 'bandwidth of the wheel observers (3.6)/(3.10) and the joint observer (7.3), rad/s',
+    'zeta': 'damping of the wheel observers and the joint observer',
+    'alpha': 'friction pole alpha*omega0 of (3.10) and (7.3)',
+    'pendulum_omega0': 'bandwidth of the nonlinear pendulum observer (7.1), rad/s',
+    'pendulum_zeta': 'damping of the nonlinear pendulum observer (7.1)',
+    'friction_source': 'friction estimate: ' + ', '.join(FRICTION_SOURCES),
+    'theta_offset': 'calibration added to theta (rad), pi if started upright',
+    'max_rate': 'samples implying a faster encoder motion (rad/s) are refused',
+}
+CONFIG_NAMES = tuple(f.name for f in fields(EstimatorConfig))
+EXTRA_PARAMS = {
+    'publish_joint_states': (True, 'publish sensor_msgs/JointState on joint_states'),
+}
+READ_ONLY_PARAMS = {
+    'diagnostics_period': (1.0, 'seconds between /diagnostics messages'),
+}
+
+
+class EstimatorNode(Node):
+    def __init__(self, **node_kwargs) -> None:
+        """node_kwargs go to rclpy Node (e.g. context, parameter_overrides, namespace) for tests."""
+        super().__init__('estimator', **node_kwargs)
+        self.rig = declare_rig(self)
+        defaults = asdict(EstimatorConfig())
+        for name in CONFIG_NAMES:
+            self.declare_parameter(name, defaults[name], ParameterDescriptor(
+                description=DESCRIPTIONS.get(name, name), dynamic_typing=True))
+        for name, (default, descr) in EXTRA_PARAMS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=descr,
+                                                                      dynamic_typing=True))
+        for name, (default, descr) in READ_ONLY_PARAMS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True,
+                                                                      dynamic_typing=True))
+        values = {name: self.get_parameter(name).value for name in CONFIG_NAMES}
+        try:
+            self.config = EstimatorConfig.from_values(values, rig=self.rig)
+        except ValueError as exc:
+            raise ConfigError(f'estimator parameters: {exc}') from exc
+        pjs = self.get_parameter('publish_joint_states').value
+        if not isinstance(pjs, bool):
+            raise ConfigError(f'publish_joint_states must be a bool, got {pjs!r}')
+        self.publish_joint_states = pjs
+        period = self.get_parameter('diagnostics_period').value
+        if isinstance(period, bool) or not isinstance(period, (int, float)) or not (
+                math.isfinite(period) and period > 0):
+            raise ConfigError(f'diagnostics_period must be a number > 0, got {period!r}')
+        self.est = make_estimator(None, self.rig, self.config)
+        self.u = 0.0
+        self.u_max = self.rig.u_max
+        # counters
+        self.samples = 0
+        self.refused_samples = 0
+        self.refused_commands = 0
+        self.seq_gaps = 0
+        self.last_seq: int | None = None
+        self.last_error = ''
+        self.switches = 0
+
+        self.add_on_set_parameters_callback(self.on_set_parameters)
+        self.add_post_set_parameters_callback(self.on_parameters_set)
+        self.pub_state = self.create_publisher(StateEstimate, 'state', QOS_CONTROL)
+        self.pub_joints = self.create_publisher(JointState, 'joint_states', QOS_CONTROL)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
+        self.create_subscription(EncoderCounts, 'encoders', self.on_encoders, QOS_CONTROL)
+        self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
+        self.create_service(Trigger, '~/reset', self.on_reset)
+        self.create_timer(float(period), self.publish_diagnostics)
+
+        self.state_msg = StateEstimate()
+        self.joint_msg = JointState()
+        self.joint_msg.name = ['pendulum', 'wheel']
+        self.get_logger().info(f'estimator {self.config.estimator}, h = {self.rig.sample_period * 1e3:g} ms, '
+                               f'friction source {self.config.friction_source}')
+
+    # ------------------------------------------------------------ parameters
+    def _candidate(self, params) -> EstimatorConfig:
+        changes = {p.name: p.value for p in params if p.name in CONFIG_NAMES}
+        return EstimatorConfig.from_values(changes, base=self.config, rig=self.rig)
+
+    def on_set_parameters(self, params) -> SetParametersResult:
+        """Validate only (the node still holds the old values here)."""
+        reasons = []
+        for p in params:
+            if p.name == 'publish_joint_states' and not isinstance(p.value, bool):
+                reasons.append(f'publish_joint_states must be a bool, got {p.value!r}')
+        try:
+            self._candidate(params)
+        except ValueError as exc:
+            reasons.append(str(exc))
+        return SetParametersResult(successful=not reasons, reason='; '.join(reasons))
+
+    def on_parameters_set(self, params) -> None:
+        """Apply accepted values: switch estimator without a jump."""
+        for p in params:
+            if p.name == 'publish_joint_states':
+                self.publish_joint_states = bool(p.value)
+        if not any(p.name in CONFIG_NAMES for p in params):
+            return
+        config = self._candidate(params)
+        if config == self.config:
+            return
+        self.est = switch_estimator(self.est, config)
+        self.config = config
+        self.switches += 1
+        self.get_logger().info(f'estimator settings: {config}')
+
+    # ------------------------------------------------------------ callbacks
+    def on_command(self, msg: MotorCommand) -> None:
+        u = msg.u
+        if not math.isfinite(u):
+            self.refused_commands += 1
+            self.last_error = f'non-finite command u={u!r} ignored'
+            return
+        um = self.u_max
+        self.u = um if u > um else (-um if u < -um else u)
+
+    def on_encoders(self, msg: EncoderCounts) -> None:
+        try:
+            e = self.est.step(msg.pendulum_counts, msg.motor_counts, self.u)
+        except ValueError as exc:
+            self.refused_samples += 1
+            self.last_error = f'seq {msg.seq}: {exc}'
+            self.get_logger().warn(self.last_error, throttle_duration_sec=1.0)
+            return
+        self.samples += 1
+        if self.last_seq is not None and msg.seq != self.last_seq + 1:
+            self.seq_gaps += 1
+        self.last_seq = msg.seq
+        s = self.state_msg
+        s.header = msg.header
+        s.seq = msg.seq
+        s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate = e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate
+        s.friction, s.energy = e.friction, e.energy
+        s.estimator = self.config.estimator
+        self.pub_state.publish(s)
+        if self.publish_joint_states:
+            j = self.joint_msg
+            j.header = msg.header
+            j.position = [e.theta, e.wheel_angle - e.theta]
+            j.velocity = [e.theta_dot, e.wheel_rate - e.theta_dot]
+            self.pub_joints.publish(j)
+
+    def on_reset(self, req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        self.est.reset()
+        resp.success = True
+        resp.message = (f'encoders re-zeroed at counts {self.est.raw_counts}' if self.est.raw_counts
+                        else 'encoders will be zeroed at the first sample')
+        self.get_logger().info(resp.message)
+        return resp
+
+    def publish_diagnostics(self) -> None:
+        level = DiagnosticStatus.OK
+        message = f'{self.config.estimator}: ok'
+        if self.refused_samples or self.refused_commands:
+            level = DiagnosticStatus.WARN
+            message = f'{self.config.estimator}: {self.last_error}'
+        if self.samples == 0:
+            level, message = DiagnosticStatus.STALE, 'no encoder sample yet'
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [diagnostic_status(
+            f'{self.get_namespace().rstrip("/")}/estimator', 'rwpend', level, message, {
+                'estimator': self.config.estimator,
+                'friction_source': self.config.friction_source,
+                'samples': self.samples,
+                'refused_samples': self.refused_samples,
+                'refused_commands': self.refused_commands,
+                'seq_gaps': self.seq_gaps,
+                'switches': self.switches,
+            })]
+        self.pub_diag.publish(arr)
+
+
+def main(args=None) -> int:
+    return run_node(EstimatorNode, args=args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

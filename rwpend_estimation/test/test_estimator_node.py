@@ -1,0 +1,93 @@
+"""In-process smoke test of the estimator node (own rclpy context, private namespace)."""
+import math
+import os
+import uuid
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate  # noqa: E402
+from rwpend_ros.common import QOS_CONTROL  # noqa: E402
+from rwpend_estimation.estimator_node import EstimatorNode  # noqa: E402
+
+
+@pytest.fixture
+def graph():
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    ns = '/t' + uuid.uuid4().hex[:8]
+    node = EstimatorNode(context=ctx, namespace=ns,
+                         parameter_overrides=[Parameter('estimator', value='joint5')])
+    tester = rclpy.create_node('tester', namespace=ns, context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(tester)
+    yield node, tester, ex
+    ex.shutdown()
+    node.destroy_node()
+    tester.destroy_node()
+    rclpy.shutdown(context=ctx)
+
+
+def spin_until(ex, cond, timeout=5.0):
+    import time
+    end = time.monotonic() + timeout
+    while not cond() and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.01)
+    return cond()
+
+
+def test_node_publishes_refuses_and_switches(graph):
+    node, tester, ex = graph
+    states, joints = [], []
+    tester.create_subscription(StateEstimate, 'state', states.append, QOS_CONTROL)
+    tester.create_subscription(JointState, 'joint_states', joints.append, QOS_CONTROL)
+    pub_enc = tester.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL)
+    pub_cmd = tester.create_publisher(MotorCommand, 'command', QOS_CONTROL)
+    assert spin_until(ex, lambda: pub_enc.get_subscription_count() > 0
+                      and tester.count_subscribers(pub_cmd.topic_name) > 0)
+    pub_cmd.publish(MotorCommand(u=float('nan')))
+    pub_cmd.publish(MotorCommand(u=25.0))
+    assert spin_until(ex, lambda: node.refused_commands == 1 and node.u == 10.0)
+    for k in range(5):
+        m = EncoderCounts(seq=k, pendulum_counts=2 * k, motor_counts=5 * k)
+        m.header.stamp.sec = 100 + k
+        pub_enc.publish(m)
+        assert spin_until(ex, lambda: len(states) == k + 1 and len(joints) == k + 1)
+    s = states[-1]
+    assert (s.seq, s.header.stamp.sec, s.estimator) == (4, 104, 'joint5')
+    assert s.theta == pytest.approx(8 * node.rig.count_angle)
+    assert joints[-1].name == ['pendulum', 'wheel']
+    assert joints[-1].position[1] == pytest.approx(20 * node.rig.count_angle)   # relative wheel joint
+    # absurd sample: counted, ignored
+    pub_enc.publish(EncoderCounts(seq=5, pendulum_counts=10 ** 8, motor_counts=0))
+    assert spin_until(ex, lambda: node.refused_samples == 1)
+    # parameters: refused with the reason, accepted ones switch without a jump
+    res = node.set_parameters([Parameter('zeta', value=float('nan'))])[0]
+    assert not res.successful and 'zeta must be finite' in res.reason
+    res = node.set_parameters([Parameter('estimator', value='kalman')])[0]
+    assert not res.successful and 'estimator must be one of' in res.reason
+    assert node.config.estimator == 'joint5'
+    assert node.set_parameters([Parameter('estimator', value='filtered')])[0].successful
+    assert node.est.name == 'filtered'
+    assert node.set_parameters([Parameter('publish_joint_states', value=False)])[0].successful
+    pub_enc.publish(EncoderCounts(seq=5, pendulum_counts=10, motor_counts=25))
+    assert spin_until(ex, lambda: len(states) == 6)
+    assert states[-1].estimator == 'filtered'
+    assert states[-1].theta - s.theta == pytest.approx(2 * node.rig.count_angle)
+    assert math.isfinite(states[-1].theta_dot)
+    assert len(joints) == 5
+    # ~/reset
+    cli = tester.create_client(Trigger, node.get_fully_qualified_name() + '/reset')
+    assert spin_until(ex, cli.service_is_ready)
+    fut = cli.call_async(Trigger.Request())
+    assert spin_until(ex, fut.done) and fut.result().success
+    pub_enc.publish(EncoderCounts(seq=6, pendulum_counts=11, motor_counts=25))
+    assert spin_until(ex, lambda: len(states) == 7)
+    assert states[-1].theta == pytest.approx(node.rig.count_angle)
