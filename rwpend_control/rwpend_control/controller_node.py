@@ -1,0 +1,298 @@
+"""``controller`` node: state estimate -> motor command, every sample.
+
+Subscribes ``state`` (StateEstimate); publishes for every state sample ``command``
+(MotorCommand: seq echoes the state's seq, header.stamp = the state's stamp, or now if it is
+zero) and ``controller/status`` (ControllerStatus) every ``status_every`` samples and at once
+on every change of mode or law.  Service ``~/set_mode`` (= ``controller/set_mode``, SetMode).
+``/diagnostics`` once a second.
+
+Parameters (all changeable at runtime, validated in the on-set callback -- the reason comes
+back to the caller and the old values stay -- and applied in the post-set callback):
+
+* ``mode``: off, wheel_velocity, wheel_angle, balance, swingup, auto (kept in sync with the
+  service and with the controller's own switches).
+* gains: ``balance.kpp/kdp/kpr/kdr``, ``balance.rate_ref``, ``patch.kpp/kdp/kdr``,
+  ``swingup.c_e/c_v/kick``, ``wheel.kp/ki/ref``, ``wheel_angle.kpr/kdr/ref``, ``theta_s``,
+  ``theta_0``, ``catch_region``, ``friction_compensation`` (off|model|estimate),
+  ``friction_deadband``, ``allow_wheel_drift``.  A gain not given at start is designed from
+  the design parameters ``<group>.design.*`` (e.g. ``balance.design.omega0: 1.5wp``); changing
+  a design parameter later redesigns its group and updates the gain parameters.
+* ``status_every`` (samples, >= 1).
+
+All algorithms live in :mod:`rwpend_control.supervisor`, :mod:`.laws`, :mod:`.design` (no rclpy).
+"""
+from __future__ import annotations
+
+import math
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from rwpend_msgs.msg import ControllerStatus, MotorCommand, StateEstimate
+from rwpend_msgs.srv import SetMode
+from rwpend_ros.common import QOS_CONTROL, QOS_STATUS, ConfigError, declare_rig, diagnostic_status, run_node
+from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
+                                       Controller, ControllerConfig, design_group, gains_from_design)
+
+DESIGNED_PARAMS = {p for names in DESIGN_GROUPS.values() for p in names}
+
+
+def _time_msg(t: float) -> Time:
+    sec = math.floor(t)
+    return Time(sec=int(sec), nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
+
+
+class ControllerNode(Node):
+    def __init__(self, **node_kwargs) -> None:
+        """node_kwargs go to rclpy Node (context, parameter_overrides, namespace) for tests."""
+        super().__init__('controller', **node_kwargs)
+        self.rig = declare_rig(self)
+        dyn = dict(dynamic_typing=True)
+        self.declare_parameter('mode', 'off', ParameterDescriptor(
+            description='operating mode: ' + ', '.join(MODES), **dyn))
+        self.declare_parameter('status_every', 10, ParameterDescriptor(
+            description='publish controller/status every N state samples (and on every switch)', **dyn))
+        for name, default in DESIGN_DEFAULTS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(
+                description='design parameter, used when the gains are not given', **dyn))
+        defaults = ControllerConfig()
+        for pname, fname in PARAM_FIELDS.items():
+            default = None if pname in DESIGNED_PARAMS else getattr(defaults, fname)
+            self.declare_parameter(pname, default, ParameterDescriptor(description=pname, **dyn))
+
+        # gains not given -> designed from the design parameters
+        values = {p: self.get_parameter(p).value for p in PARAM_FIELDS}
+        designs = {n: self.get_parameter(n).value for n in DESIGN_DEFAULTS}
+        for group, names in DESIGN_GROUPS.items():
+            if any(values[n] is None for n in names):
+                try:
+                    designed = gains_from_design(self.rig, group, self._spec(group, designs))
+                except (ValueError, TypeError, KeyError) as exc:
+                    raise ConfigError(f'{group} design: {exc}') from exc
+                for n in names:
+                    if values[n] is None:
+                        values[n] = designed[n]
+        try:
+            self.ctrl = Controller(self.rig, ControllerConfig())  # placeholder, replaced below
+        except ValueError as exc:  # pragma: no cover - defaults are valid
+            raise ConfigError(str(exc)) from exc
+        ok, reason, cfg = self.ctrl.check_params(values)
+        if not ok:
+            raise ConfigError(f'controller parameters: {reason}')
+        self.ctrl = Controller(self.rig, cfg)
+        self.set_parameters([Parameter(n, value=values[n]) for n in DESIGNED_PARAMS])
+        self.status_every = self._status_every(self.get_parameter('status_every').value)
+        mode = self.get_parameter('mode').value
+        ok, msg = self.ctrl.set_mode(mode) if isinstance(mode, str) else (False, f'mode must be a string, got {mode!r}')
+        if not ok:
+            raise ConfigError(msg)
+
+        self.samples = 0
+        self._since_status = 0
+        self._syncing = False
+        self._sync_timer = None
+        self._pending_params: list[Parameter] = []
+        self.add_on_set_parameters_callback(self.on_set_parameters)
+        self.add_post_set_parameters_callback(self.on_parameters_set)
+        self.pub_cmd = self.create_publisher(MotorCommand, 'command', QOS_CONTROL)
+        self.pub_status = self.create_publisher(ControllerStatus, 'controller/status', QOS_STATUS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
+        self.create_subscription(StateEstimate, 'state', self.on_state, QOS_CONTROL)
+        self.create_service(SetMode, '~/set_mode', self.on_set_mode)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.cmd_msg = MotorCommand()
+        self.last_status = None
+        c = self.ctrl.config
+        self.get_logger().info(
+            f'mode {self.ctrl.mode}; balance ({c.balance_kpp:.4g}, {c.balance_kdp:.4g}, {c.balance_kpr:.4g}, '
+            f'{c.balance_kdr:.4g}); patch ({c.patch_kpp:.4g}, {c.patch_kdp:.4g}, {c.patch_kdr:.4g}); '
+            f'swingup c_e={c.swingup_c_e:.4g} c_v={c.swingup_c_v:.4g}; friction {c.friction_compensation}')
+
+    # ------------------------------------------------------------ parameters
+    def _spec(self, group: str, designs: dict) -> dict:
+        prefix = f'{group}.design.'
+        return {k[len(prefix):]: v for k, v in designs.items() if k.startswith(prefix)}
+
+    @staticmethod
+    def _status_every(v) -> int:
+        if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 1_000_000:
+            raise ConfigError(f'status_every must be an integer >= 1, got {v!r}')
+        return v
+
+    def _candidate(self, params) -> tuple[dict, list[str]]:
+        """Controller values implied by ``params`` (explicit gains win over redesigned ones)."""
+        changes = {p.name: p.value for p in params}
+        values = {n: v for n, v in changes.items() if n in PARAM_FIELDS}
+        groups = {design_group(n) for n in changes} - {None}
+        designs = {n: self.get_parameter(n).value for n in DESIGN_DEFAULTS}
+        designs.update({n: v for n, v in changes.items() if n in DESIGN_DEFAULTS})
+        errors = []
+        for group in sorted(groups):
+            try:
+                designed = gains_from_design(self.rig, group, self._spec(group, designs))
+            except (ValueError, TypeError, KeyError) as exc:
+                errors.append(f'{group} design: {exc}')
+                continue
+            for n, v in designed.items():
+                values.setdefault(n, v)
+        return values, errors
+
+    def on_set_parameters(self, params) -> SetParametersResult:
+        """Validate only (the node still holds the old values here)."""
+        if self._syncing:
+            return SetParametersResult(successful=True)
+        reasons = []
+        for p in params:
+            if p.name.startswith('rig.'):
+                reasons.append(f'{p.name} is read-only')
+            elif p.name == 'status_every':
+                try:
+                    self._status_every(p.value)
+                except ConfigError as exc:
+                    reasons.append(str(exc))
+            elif p.name == 'mode':
+                ok, why = self._mode_possible(p.value)
+                if not ok:
+                    reasons.append(why)
+        values, errors = self._candidate(params)
+        reasons += errors
+        if values and not errors:
+            ok, why, _ = self.ctrl.check_params(values)
+            if not ok:
+                reasons.append(why)
+        return SetParametersResult(successful=not reasons, reason='; '.join(reasons))
+
+    def _mode_possible(self, mode) -> tuple[bool, str]:
+        if not isinstance(mode, str) or mode not in MODES:
+            return False, f'mode must be one of {", ".join(MODES)}, got {mode!r}'
+        x = self.ctrl._last_x
+        if mode == 'balance' and mode != self.ctrl.mode and x is not None and abs(x) > self.ctrl.config.theta_0:
+            return False, (f'balance refused: |theta-pi| = {abs(x):.3g} > theta_0 = '
+                           f'{self.ctrl.config.theta_0:g} (use auto to swing up)')
+        return True, ''
+
+    def on_parameters_set(self, params) -> None:
+        """Apply accepted values."""
+        if self._syncing:
+            return
+        for p in params:
+            if p.name == 'status_every':
+                self.status_every = int(p.value)
+        values, errors = self._candidate(params)
+        if values and not errors:
+            ok, why = self.ctrl.set_params(values)
+            if not ok:  # pragma: no cover - validated in on_set_parameters
+                self.get_logger().error(f'parameters not applied: {why}')
+            # redesigned gains: show them in the gain parameters too
+            explicit = {p.name for p in params}
+            sync = [Parameter(n, value=v) for n, v in values.items() if n not in explicit]
+            if sync:
+                self._schedule_sync(sync)
+            self.get_logger().info('parameters: ' + ', '.join(f'{n}={v:.6g}' if isinstance(v, float) else f'{n}={v}'
+                                                              for n, v in sorted(values.items())))
+        for p in params:
+            if p.name == 'mode' and p.value != self.ctrl.mode:
+                ok, msg = self.ctrl.set_mode(p.value)
+                if not ok:  # state changed between validation and application
+                    self.get_logger().warn(msg)
+                    self._schedule_sync([Parameter('mode', value=self.ctrl.mode)])
+
+    def _schedule_sync(self, params: list[Parameter]) -> None:
+        """Set parameters to reflect the controller, outside the parameter callbacks."""
+        self._pending_params.extend(params)
+        if self._sync_timer is None:
+            self._sync_timer = self.create_timer(0.0, self._do_sync)
+
+    def _do_sync(self) -> None:
+        if self._sync_timer is not None:
+            self.destroy_timer(self._sync_timer)
+            self._sync_timer = None
+        params, self._pending_params = self._pending_params, []
+        if params:
+            self._syncing = True
+            try:
+                self.set_parameters(params)
+            finally:
+                self._syncing = False
+
+    # ------------------------------------------------------------ callbacks
+    def on_state(self, msg: StateEstimate) -> None:
+        stamp = msg.header.stamp
+        if stamp.sec == 0 and stamp.nanosec == 0:
+            stamp = self.get_clock().now().to_msg()
+        t = stamp.sec + stamp.nanosec * 1e-9
+        u, st = self.ctrl.update(t, msg.seq, msg.theta, msg.theta_dot, msg.wheel_angle, msg.wheel_rate,
+                                 msg.friction)
+        c = self.cmd_msg
+        c.header.stamp = stamp
+        c.header.frame_id = msg.header.frame_id
+        c.seq = msg.seq
+        c.u = u
+        self.pub_cmd.publish(c)
+        self.samples += 1
+        self._since_status += 1
+        self.last_status = st
+        if st.event is not None or self._since_status >= self.status_every:
+            self._since_status = 0
+            self.publish_status(st, stamp)
+        if st.event is not None:
+            ev = st.event
+            self.get_logger().info(f'switch {ev.from_} -> {ev.to}: {ev.reason}')
+            if self.get_parameter('mode').value != self.ctrl.mode:
+                self._schedule_sync([Parameter('mode', value=self.ctrl.mode)])
+        if st.fault:
+            self.get_logger().warn(st.fault, throttle_duration_sec=1.0)
+
+    def publish_status(self, st, stamp) -> None:
+        m = ControllerStatus()
+        m.header.stamp = stamp
+        m.seq = st.seq
+        m.mode, m.law = st.mode, st.law
+        m.u, m.u_unsaturated = st.u, st.u_unsaturated
+        m.friction_compensation = st.friction_compensation
+        m.saturated = st.saturated
+        m.last_switch = _time_msg(st.last_switch)
+        m.switch_count = st.switch_count
+        m.reason, m.fault = st.reason, st.fault
+        self.pub_status.publish(m)
+
+    def on_set_mode(self, req: SetMode.Request, resp: SetMode.Response) -> SetMode.Response:
+        resp.previous_mode = self.ctrl.mode
+        ok, msg = self.ctrl.set_mode(req.mode)
+        resp.success, resp.message = ok, msg
+        if ok:
+            self._schedule_sync([Parameter('mode', value=self.ctrl.mode)])
+            self.get_logger().info(f'set_mode: {msg}')
+        return resp
+
+    def publish_diagnostics(self) -> None:
+        st = self.last_status
+        if st is None:
+            level, message = DiagnosticStatus.STALE, 'no state sample yet'
+        elif st.fault:
+            level, message = DiagnosticStatus.ERROR, st.fault
+        elif self.ctrl.bad_state_count:
+            level, message = DiagnosticStatus.WARN, f'{self.ctrl.bad_state_count} bad state samples refused'
+        else:
+            level, message = DiagnosticStatus.OK, f'{self.ctrl.mode}/{self.ctrl.law}'
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [diagnostic_status(
+            f'{self.get_namespace().rstrip("/")}/controller', 'rwpend', level, message, {
+                'mode': self.ctrl.mode, 'law': self.ctrl.law, 'samples': self.samples,
+                'switch_count': self.ctrl.switch_count, 'reason': self.ctrl.reason,
+                'bad_states': self.ctrl.bad_state_count,
+                'friction_compensation': self.ctrl.config.friction_compensation,
+            })]
+        self.pub_diag.publish(arr)
+
+
+def main(args=None) -> int:
+    return run_node(ControllerNode, args=args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
