@@ -1,0 +1,191 @@
+"""Command-line entry points: ``record``, ``bag info``, ``play``, ``analyze``.
+
+Each ``*_main(argv)`` returns an exit status (2 for usage errors and unreadable input).
+``python -m rwpend_bag.cli {record,info,play,analyze} ...`` runs them directly.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # exit 2 with a clear message (argparse's default, explicit)
+        self.print_usage(sys.stderr)
+        print(f'{self.prog}: error: {message}', file=sys.stderr)
+        raise SystemExit(2)
+
+
+def _run(fn, argv):
+    try:
+        return fn(argv)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+
+
+def _usage_error(prog, msg) -> int:
+    print(f'{prog}: error: {msg}', file=sys.stderr, flush=True)
+    return 2
+
+
+def _abs_topic(name: str, namespace: str) -> str:
+    if name.startswith('/'):
+        return name
+    ns = namespace.rstrip('/')
+    return f'{ns}/{name}' if ns else f'/{name}'
+
+
+# ------------------------------------------------------------------ record
+def record_main(argv=None) -> int:
+    return _run(_record, sys.argv[1:] if argv is None else argv)
+
+
+def _record(argv) -> int:
+    p = _Parser(prog='rwpend record',
+                description='Record topics to a rosbag2 MCAP bag (Ctrl-C / SIGTERM to stop).')
+    p.add_argument('-o', '--output', help='bag directory to create (default: rwpend_<date>)')
+    p.add_argument('-a', '--all', action='store_true', help='record every topic (also later ones)')
+    p.add_argument('--namespace', default='/', help='namespace for relative topic names')
+    p.add_argument('topics', nargs='*', help='topics to record')
+    a = p.parse_args(argv)
+    if a.all and a.topics:
+        return _usage_error(p.prog, 'give either --all or topics, not both')
+    if not a.all and not a.topics:
+        return _usage_error(p.prog, 'nothing to record: give topics or --all')
+    out = Path(a.output or time.strftime('rwpend_%Y_%m_%d-%H_%M_%S'))
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        return _usage_error(p.prog, f'{out} already exists (choose a new bag directory)')
+    if not out.parent.exists():
+        return _usage_error(p.prog, f'{out.parent} does not exist')
+    topics = [_abs_topic(t, a.namespace) for t in a.topics]
+    from rwpend_ros.common import run_node
+
+    from .recorder_node import Recorder
+    return run_node(lambda: Recorder(str(out), topics, a.all))
+
+
+# ------------------------------------------------------------------ info
+def info_main(argv=None) -> int:
+    return _run(_info, sys.argv[1:] if argv is None else argv)
+
+
+def _info(argv) -> int:
+    p = _Parser(prog='rwpend bag info', description='Topics, counts, rates, duration, seq gaps.')
+    p.add_argument('bag')
+    p.add_argument('--json', action='store_true')
+    a = p.parse_args(argv)
+    from .info import bag_info, format_info
+    from .reader import BagReadError
+    try:
+        info = bag_info(a.bag)
+    except BagReadError as exc:
+        return _usage_error(p.prog, str(exc))
+    print(json.dumps(info, indent=2) if a.json else format_info(info))
+    return 0
+
+
+# ------------------------------------------------------------------ play
+def play_main(argv=None) -> int:
+    return _run(_play, sys.argv[1:] if argv is None else argv)
+
+
+def _play(argv) -> int:
+    p = _Parser(prog='rwpend play', description='Publish a bag with its original timing.')
+    p.add_argument('bag')
+    p.add_argument('--rate', type=float, default=1.0)
+    p.add_argument('--loop', action='store_true')
+    p.add_argument('--topics', nargs='+', default=None)
+    p.add_argument('--remap', action='append', default=[], metavar='FROM:=TO')
+    p.add_argument('--start', type=float, default=0.0, metavar='S', help='skip the first S seconds')
+    p.add_argument('--clock', action='store_true', help='publish /clock from the bag time')
+    p.add_argument('--wait', type=float, default=2.0,
+                   help='wait up to this long for a subscriber before playing (s)')
+    a = p.parse_args(argv)
+    if not (a.rate > 0) or a.rate > 1000:
+        return _usage_error(p.prog, '--rate must be in (0, 1000]')
+    if a.start < 0:
+        return _usage_error(p.prog, '--start must be >= 0')
+    remap = {}
+    for r in a.remap:
+        src, sep, dst = r.partition(':=')
+        if not sep or not src or not dst:
+            return _usage_error(p.prog, f'bad --remap {r!r} (expected from:=to)')
+        remap[_abs_topic(src, '/')] = _abs_topic(dst, '/')
+    from .player_core import schedule
+    from .reader import BagReadError, read_bag
+    try:
+        bag = read_bag(a.bag)
+    except BagReadError as exc:
+        return _usage_error(p.prog, str(exc))
+    for w in bag.warnings:
+        print(f'play: warning: {w}', file=sys.stderr)
+    topics = [_abs_topic(t, '/') for t in a.topics] if a.topics else None
+    if topics:
+        unknown = [t for t in topics if t not in bag.topics]
+        if unknown:
+            return _usage_error(p.prog, f'not in the bag: {", ".join(unknown)}')
+    sched = schedule(bag, topics, remap, a.start)
+    if not len(sched):
+        return _usage_error(p.prog, 'nothing to play (empty selection)')
+    from .player_node import run
+    return run(sched, a.rate, a.loop, a.clock, a.wait)
+
+
+# ------------------------------------------------------------------ analyze
+def analyze_main(argv=None) -> int:
+    return _run(_analyze, sys.argv[1:] if argv is None else argv)
+
+
+def _analyze(argv) -> int:
+    p = _Parser(prog='rwpend analyze', description='Metrics and plots of a run.')
+    p.add_argument('bag')
+    p.add_argument('--plot', metavar='FILE', help='write the figure (.png or .svg)')
+    p.add_argument('--json', action='store_true', help='print the metrics as JSON')
+    p.add_argument('--bench', action='store_true', help='also measure decode throughput')
+    a = p.parse_args(argv)
+    if a.plot and os.path.splitext(a.plot)[1].lower() not in ('.png', '.svg', '.pdf'):
+        return _usage_error(p.prog, '--plot must end in .png, .svg or .pdf')
+    if a.plot and not Path(a.plot).resolve().parent.exists():
+        return _usage_error(p.prog, f'{Path(a.plot).parent} does not exist')
+    from . import analysis
+    from .reader import BagReadError, read_bag
+    try:
+        bag = read_bag(a.bag)
+    except BagReadError as exc:
+        return _usage_error(p.prog, str(exc))
+    for w in bag.warnings:
+        print(f'analyze: warning: {w}', file=sys.stderr)
+    series = analysis.load_series(bag)
+    m = analysis.analyze(bag, series)
+    if a.bench:
+        m['decode_bench'] = analysis.bench_decode(bag)
+    print(json.dumps(m, indent=2) if a.json else analysis.format_metrics(m))
+    if a.plot:
+        if m.get('error'):
+            print(f'analyze: no plot: {m["error"]}', file=sys.stderr)
+            return 1
+        analysis.plot(bag, a.plot, series)
+        if not a.json:
+            print(f'plot: {a.plot}')
+    return 1 if m.get('error') else 0
+
+
+COMMANDS = {'record': record_main, 'info': info_main, 'play': play_main, 'analyze': analyze_main}
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:2] == ['bag', 'info']:
+        argv = ['info'] + argv[2:]
+    if not argv or argv[0] not in COMMANDS:
+        print('usage: python -m rwpend_bag.cli {record,info,play,analyze} ...', file=sys.stderr)
+        return 2
+    return COMMANDS[argv[0]](argv[1:])
+
+
+if __name__ == '__main__':
+    sys.exit(main())

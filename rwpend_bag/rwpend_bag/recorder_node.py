@@ -1,0 +1,109 @@
+"""Recorder node ``recorder``: raw (serialized) subscriptions to any topic, written to a bag.
+
+Thin rclpy layer over :class:`rwpend_bag.writer.ThreadedBagWriter`: the subscription callbacks
+only enqueue (topic, wire bytes, receive time); a writer thread does the MCAP work. Topics that
+appear later are picked up (graph polled every 0.5 s). Each subscription uses the publishers'
+reliability/durability and a keep-last 1000 history.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from . import msgdefs
+from .writer import INFINITE_TIME, ThreadedBagWriter
+
+DEPTH = 1000
+POLL_S = 0.5
+
+
+def _dur(d) -> dict:
+    ns = getattr(d, 'nanoseconds', None)
+    if ns is None or ns >= 9223372036854775807:
+        return dict(INFINITE_TIME)
+    return {'sec': ns // 1_000_000_000, 'nsec': ns % 1_000_000_000}
+
+
+def qos_dict(q) -> dict:
+    """rclpy QoSProfile -> rosbag2 v9 offered_qos_profiles entry."""
+    def nm(v):
+        return v.name.lower() if hasattr(v, 'name') else str(v).lower()
+    return {'history': nm(q.history), 'depth': int(q.depth), 'reliability': nm(q.reliability),
+            'durability': nm(q.durability), 'deadline': _dur(q.deadline),
+            'lifespan': _dur(q.lifespan), 'liveliness': nm(q.liveliness),
+            'liveliness_lease_duration': _dur(q.liveliness_lease_duration),
+            'avoid_ros_namespace_conventions': bool(q.avoid_ros_namespace_conventions)}
+
+
+class Recorder(Node):
+    def __init__(self, out_dir: str, topics: list[str] | None, record_all: bool):
+        super().__init__('recorder')
+        self.writer = ThreadedBagWriter(out_dir)
+        self.wanted = set(topics or [])
+        self.record_all = record_all
+        self.subs: dict[str, object] = {}
+        self.skipped: dict[str, str] = {}
+        self._closed = False
+        self.create_timer(POLL_S, self.discover)
+        self.get_logger().info(f'recording to {out_dir} '
+                               f'({"all topics" if record_all else ", ".join(sorted(self.wanted))})')
+        self.discover()
+
+    def discover(self) -> None:
+        for name, types in self.get_topic_names_and_types():
+            if name in self.subs or name in self.skipped:
+                continue
+            if not self.record_all and name not in self.wanted:
+                continue
+            type_name = types[0]
+            try:
+                cls = msgdefs.import_message_class(type_name)
+                msgdefs.joined_definition(type_name)
+            except (ImportError, LookupError, ValueError) as exc:
+                self.skipped[name] = str(exc)
+                self.get_logger().warn(f'not recording {name}: {exc}')
+                continue
+            pubs = self.get_publishers_info_by_topic(name)
+            if not pubs:
+                continue  # QoS unknown until a publisher exists; retry at the next poll
+            offered = [p.qos_profile for p in pubs]
+            reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+            latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH,
+                             reliability=ReliabilityPolicy.RELIABLE if reliable
+                             else ReliabilityPolicy.BEST_EFFORT,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+                             else DurabilityPolicy.VOLATILE)
+            self.writer.add_topic(name, type_name, [qos_dict(q) for q in offered])
+            put = self.writer.put
+            self.subs[name] = self.create_subscription(
+                cls, name, lambda data, _n=name: put(_n, data, time.time_ns()), qos, raw=True)
+            self.get_logger().info(f'recording {name} [{type_name}] '
+                                   f'{"reliable" if reliable else "best effort"}')
+
+    def close(self) -> dict:
+        if self._closed:
+            return {}
+        self._closed = True
+        for sub in list(self.subs.values()):
+            try:
+                self.destroy_subscription(sub)
+            except Exception:  # noqa: BLE001 - context may be gone already
+                pass
+        report = self.writer.close({'skipped_topics': self.skipped})
+        print_report(report)
+        return report
+
+
+def print_report(report: dict, file=sys.stdout) -> None:
+    print(f"bag {report['bag']}: {report['message_count']} messages", file=file)
+    for name, d in report['topics'].items():
+        print(f'  {name}: {d["text"]}', file=file)
+    for name, why in report.get('skipped_topics', {}).items():
+        print(f'  {name}: NOT RECORDED ({why})', file=file)
+    if report.get('writer_error'):
+        print(f"  WRITER ERROR: {report['writer_error']}", file=file)
+    file.flush()
