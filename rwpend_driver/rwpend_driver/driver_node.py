@@ -1,0 +1,240 @@
+"""``driver`` node: the real rig (or the emulator) over a serial port, with the simulator's topics.
+
+Publishes ``encoders`` (EncoderCounts: seq = monotone sample counter, header.stamp = receive
+time), subscribes ``command`` (MotorCommand), publishes ``/diagnostics``.  Managed lifecycle
+(rclpy.lifecycle): configure = open the port and handshake; activate = enable the amplifier and
+publish; deactivate = zero torque, amplifier off; cleanup = close.  ``autostart`` (default
+true) configures and activates at start (retrying configure while the device is absent).
+
+All protocol and link logic lives in :mod:`rwpend_driver.link` / :mod:`rwpend_driver.protocol`.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from rwpend_msgs.msg import EncoderCounts, MotorCommand
+from rwpend_ros.common import QOS_CONTROL, QOS_STATUS, ConfigError, diagnostic_status, run_node
+
+from .link import DriverLink, LinkConfig
+
+PARAMS = {
+    'port': ('', 'serial device of the rig (e.g. /dev/ttyACM0, or the emulator\'s --link path)'),
+    'baud': (921600, 'baud rate (ignored by USB CDC and ptys)'),
+    'counts_per_rev': (4000, 'encoder counts per revolution; must equal what the device reports'),
+    'pendulum_sign': (1, 'direction sign of the pendulum encoder (+1 or -1)'),
+    'motor_sign': (1, 'direction sign of the motor: its encoder and its command (+1 or -1)'),
+    'zero_on_configure': (False, 'zero both encoders at configure (pendulum hanging at rest!)'),
+    'watchdog_period': (0.05, 'device watchdog: s without a valid command before the motor is zeroed'),
+    'command_timeout_samples': (3, 'samples without a fresh command before the driver sends u = 0'),
+    'link_timeout': (0.1, 's without a valid frame before the link is declared lost'),
+    'handshake_timeout': (0.5, 's to wait for each handshake answer'),
+    'connect_timeout': (2.0, 's configure waits for the first handshake'),
+    'autostart': (True, 'configure and activate at start'),
+    'frame_id': ('rwpend', 'frame_id of the published headers'),
+    'diagnostics_period': (0.5, 's between /diagnostics messages'),
+}
+
+
+class DriverNode(LifecycleNode):
+    def __init__(self) -> None:
+        super().__init__('driver')
+        for name, (default, descr) in PARAMS.items():
+            self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True))
+        p = {name: self.get_parameter(name).value for name in PARAMS}
+        self.p = p
+        self.cfg = LinkConfig(port=p['port'], baud=p['baud'], counts_per_rev=p['counts_per_rev'],
+                              pendulum_sign=p['pendulum_sign'], motor_sign=p['motor_sign'],
+                              zero_on_configure=bool(p['zero_on_configure']),
+                              watchdog_period=float(p['watchdog_period']),
+                              command_timeout_samples=p['command_timeout_samples'],
+                              link_timeout=float(p['link_timeout']),
+                              handshake_timeout=float(p['handshake_timeout']))
+        errors = self.cfg.errors()
+        for name in ('connect_timeout', 'diagnostics_period'):
+            if not isinstance(p[name], (int, float)) or not p[name] > 0:
+                errors.append(f'{name} must be > 0, got {p[name]!r}')
+        if errors:
+            raise ConfigError('driver parameters: ' + '; '.join(errors))
+        self.link: DriverLink | None = None
+        self.thread: threading.Thread | None = None
+        self.stop = threading.Event()
+        self.active = False
+        self.lifecycle = 'unconfigured'
+        self.configure_failures = 0
+        self.last_configure_error = ''
+        self.enc = EncoderCounts()
+        self.enc.header.frame_id = p['frame_id']
+        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
+        self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
+        self.create_timer(p['diagnostics_period'], self.publish_diagnostics)
+        self.autostart_timer = None
+        if p['autostart']:
+            self.autostart_timer = self.create_timer(0.01, self.autostart)
+
+    # ------------------------------------------------------------ autostart
+    def autostart(self) -> None:
+        """Configure (retried every connect_timeout while the device is absent), then activate."""
+        if self.lifecycle == 'unconfigured':
+            self.autostart_timer.timer_period_ns = int(1e9)
+            self.trigger_configure()
+        if self.lifecycle == 'inactive':
+            self.trigger_activate()
+        if self.lifecycle == 'active':
+            self.autostart_timer.cancel()
+
+    # ------------------------------------------------------------ lifecycle
+    def _log(self, level: str, msg: str) -> None:
+        # one call site per severity: rclpy's logger refuses a severity change at a call site
+        lg = self.get_logger()
+        if level == 'error':
+            lg.error(msg)
+        elif level == 'warn':
+            lg.warning(msg)
+        else:
+            lg.info(msg)
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.link = DriverLink(self.cfg, on_sample=self.on_sample, log=self._log)
+        deadline = time.monotonic() + self.p['connect_timeout']
+        ok = False
+        while time.monotonic() < deadline:
+            if self.link.try_connect():
+                ok = True
+                break
+            if self.link.fatal:
+                break
+            time.sleep(min(self.link.next_attempt - self.link.clock(), max(0.0, deadline - time.monotonic()), 0.5))
+        if not ok:
+            self.configure_failures += 1
+            self.last_configure_error = self.link.error
+            if self.configure_failures == 1 or self.link.fatal:
+                self.get_logger().error(f'configure failed: {self.link.error}')
+            self.link.close()
+            self.link = None
+            return TransitionCallbackReturn.FAILURE
+        self.last_configure_error = ''
+        self.stop.clear()
+        self.thread = threading.Thread(target=self.link_loop, name='driver-link', daemon=True)
+        self.thread.start()
+        self.lifecycle = 'inactive'
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.link.set_active(True)
+        self.active = True
+        self.lifecycle = 'active'
+        self.get_logger().info('active: amplifier enabled, zero torque until commands arrive')
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = False
+        self.link.set_active(False)
+        self.lifecycle = 'inactive'
+        self.get_logger().info('inactive: torque zero, amplifier disabled')
+        return TransitionCallbackReturn.SUCCESS
+
+    def _teardown(self) -> None:
+        self.active = False
+        self.stop.set()
+        if self.thread is not None:
+            self.thread.join(timeout=2.0)
+            self.thread = None
+        if self.link is not None:
+            self.link.close()
+        self.lifecycle = 'unconfigured'
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._teardown()
+        self.link = None
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._teardown()
+        self.lifecycle = 'finalized'
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._teardown()
+        return TransitionCallbackReturn.SUCCESS
+
+    # ------------------------------------------------------------ data path
+    def link_loop(self) -> None:
+        link = self.link
+        was = True
+        while not self.stop.is_set():
+            try:
+                link.poll()
+            except Exception as exc:  # noqa: BLE001 - the link thread must never die
+                link.lose(f'unexpected {type(exc).__name__}: {exc}')
+            if link.connected != was:
+                was = link.connected
+                self.publish_diagnostics()      # report losses and recoveries at once
+
+    def on_sample(self, seq: int, pc: int, mc: int, s) -> None:
+        if not self.active:
+            return
+        now = time.time_ns()
+        e = self.enc
+        e.header.stamp.sec, e.header.stamp.nanosec = divmod(now, 1_000_000_000)
+        e.seq, e.pendulum_counts, e.motor_counts = seq, pc, mc
+        try:
+            self.pub_enc.publish(e)
+        except Exception:  # noqa: BLE001 - context shut down under the link thread
+            self.stop.set()
+
+    def on_command(self, msg: MotorCommand) -> None:
+        link = self.link
+        if link is None or not self.active:
+            return
+        link.command(msg.seq, msg.u)
+
+    # ------------------------------------------------------------ diagnostics
+    def publish_diagnostics(self) -> None:
+        link = self.link
+        values = {'lifecycle': self.lifecycle, 'port': self.cfg.port}
+        if link is None:
+            level = DiagnosticStatus.ERROR if self.last_configure_error else DiagnosticStatus.WARN
+            msg = (f'not configured: {self.last_configure_error}' if self.last_configure_error
+                   else 'not configured')
+            values['configure_failures'] = self.configure_failures
+        else:
+            snap = link.snapshot()
+            values.update(snap)
+            if not snap['connected']:
+                level, msg = DiagnosticStatus.ERROR, f'link down ({snap["error"]}); reconnecting, no encoders'
+            elif snap.get('device.watchdog_tripped'):
+                level, msg = DiagnosticStatus.WARN, 'device watchdog tripped: motor at zero'
+            elif snap['command_timed_out'] and self.active and snap['timeouts']:
+                level, msg = DiagnosticStatus.WARN, 'command timeout: sending u = 0'
+            elif self.active:
+                level, msg = DiagnosticStatus.OK, 'active'
+            else:
+                level, msg = DiagnosticStatus.OK, 'connected, inactive (torque off)'
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status.append(diagnostic_status(f'{self.get_namespace().rstrip("/")}/driver: serial link',
+                                            self.cfg.port, level, msg, values))
+        try:
+            self.pub_diag.publish(arr)
+        except Exception:  # noqa: BLE001 - context shutting down
+            pass
+
+    def close(self) -> None:
+        """Called by run_node before destruction: torque zero, amplifier off, port closed."""
+        self._teardown()
+        self.publish_diagnostics()
+
+
+def main(args=None) -> int:
+    return run_node(DriverNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
