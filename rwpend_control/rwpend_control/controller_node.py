@@ -93,7 +93,6 @@ class ControllerNode(Node):
         self.samples = 0
         self._since_status = 0
         self._syncing = False
-        self._sync_timer = None
         self._pending_params: list[Parameter] = []
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
@@ -103,6 +102,7 @@ class ControllerNode(Node):
         self.create_subscription(StateEstimate, 'state', self.on_state, QOS_CONTROL)
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
         self.create_timer(1.0, self.publish_diagnostics)
+        self.create_timer(0.05, self._do_sync)
         self.cmd_msg = MotorCommand()
         self.last_status = None
         c = self.ctrl.config
@@ -203,13 +203,10 @@ class ControllerNode(Node):
     def _schedule_sync(self, params: list[Parameter]) -> None:
         """Set parameters to reflect the controller, outside the parameter callbacks."""
         self._pending_params.extend(params)
-        if self._sync_timer is None:
-            self._sync_timer = self.create_timer(0.0, self._do_sync)
 
     def _do_sync(self) -> None:
-        if self._sync_timer is not None:
-            self.destroy_timer(self._sync_timer)
-            self._sync_timer = None
+        """Housekeeping timer (20 Hz): a timer that lives as long as the node -- rclpy's
+        EventsExecutor failed on a one-shot timer destroyed in its own callback (measured)."""
         params, self._pending_params = self._pending_params, []
         if params:
             self._syncing = True

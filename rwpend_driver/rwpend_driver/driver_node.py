@@ -233,6 +233,10 @@ class DriverNode(LifecycleNode):
 
 
 def main(args=None) -> int:
+    # The data path runs in the driver's own link thread; the executor only serves commands,
+    # lifecycle services and a re-armed autostart timer, which the EventsExecutor of rclpy 7.1.6
+    # does not handle reliably (see rwpend_ros.common.make_executor).
+    os.environ.setdefault('RWPEND_EXECUTOR', 'single')
     return run_node(DriverNode, args)
 
 

@@ -85,6 +85,9 @@ class EstimatorNode(Node):
             raise ConfigError(f'diagnostics_period must be a number > 0, got {period!r}')
         self.est = make_estimator(None, self.rig, self.config)
         self.u = 0.0
+        self.u_seq = -1          # seq answered by the latest command
+        self.pending: EncoderCounts | None = None
+        self.deferred = 0        # samples that waited for their command
         self.u_max = self.rig.u_max
         # counters
         self.samples = 0
@@ -152,8 +155,29 @@ class EstimatorNode(Node):
             return
         um = self.u_max
         self.u = um if u > um else (-um if u < -um else u)
+        self.u_seq = max(self.u_seq, int(msg.seq))
+        p = self.pending
+        if p is not None and self.u_seq >= p.seq - 1:
+            self.pending = None
+            self.process(p)
 
     def on_encoders(self, msg: EncoderCounts) -> None:
+        """Sample k is estimated with the command that answered sample k-1 (held over
+        [t_{k-1}, t_k), the u of (3.5)/(7.1)). The two arrive on different topics from different
+        processes, in either order; while the controller is answering (its last command is at
+        most 3 samples old) sample k waits for command k-1 -- until that command or sample k+1
+        arrives, whichever is first. So a lockstep run gives the same estimates every time."""
+        p = self.pending
+        if p is not None:
+            self.pending = None
+            self.process(p)
+        if 0 <= self.u_seq < msg.seq - 1 and self.u_seq >= msg.seq - 4:
+            self.pending = msg
+            self.deferred += 1
+            return
+        self.process(msg)
+
+    def process(self, msg: EncoderCounts) -> None:
         try:
             e = self.est.step(msg.pendulum_counts, msg.motor_counts, self.u)
         except ValueError as exc:
@@ -205,6 +229,7 @@ class EstimatorNode(Node):
                 'refused_samples': self.refused_samples,
                 'refused_commands': self.refused_commands,
                 'seq_gaps': self.seq_gaps,
+                'deferred_samples': self.deferred,
                 'switches': self.switches,
             })]
         self.pub_diag.publish(arr)

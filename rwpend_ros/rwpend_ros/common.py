@@ -59,11 +59,13 @@ def declare_rig(node) -> Rig:
 def make_executor():
     """The executor for a node process.
 
-    rclpy's EventsExecutor (ENVIRONMENT.md: about 1.5x lower loop latency at 1 kHz than the
-    SingleThreadedExecutor) unless ``RWPEND_EXECUTOR=single``. Drive it with
-    :func:`spin_executor`: in rclpy 7.1.6, ``EventsExecutor.spin()`` fires no timer and
-    ignores shutdown (measured: 0 callbacks of a 10 ms timer in 1 s at 100 % CPU), whereas
-    ``spin_once`` works.
+    rclpy's EventsExecutor by default (lockstep loop measured 3x faster than with the
+    SingleThreadedExecutor; ENVIRONMENT.md: 1.5x lower ring latency), ``RWPEND_EXECUTOR=single``
+    for the SingleThreadedExecutor. Known limits of the EventsExecutor in rclpy 7.1.6, which our
+    nodes avoid: its ``spin()`` fires no timer and ignores shutdown (0 callbacks of a 10 ms timer
+    in 1 s at 100 % CPU) -- drive it with :func:`spin_executor` (``spin_once``); and a one-shot
+    timer destroyed inside its own callback made ``spin_once`` raise "Unable to convert call
+    argument '0'" -- nodes keep their timers for their whole life.
     """
     if os.environ.get('RWPEND_EXECUTOR', 'events') != 'single':
         try:

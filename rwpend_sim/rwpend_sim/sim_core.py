@@ -54,7 +54,21 @@ class SimCore:
         self.timed_out = False
         self.estop = False
         self._torque_until = -1.0
+        self._taps: list[tuple[float, float]] = []
         self.counters = SimCounters()
+
+    def schedule_taps(self, times, sizes) -> None:
+        """Taps at given simulated times (s): theta_dot += size (rad/s) at the first sample at or
+        after each time -- scripted, so a lockstep run with taps is reproducible."""
+        times, sizes = list(times), list(sizes)
+        if len(times) != len(sizes):
+            raise ValueError(f'taps: {len(times)} times but {len(sizes)} sizes')
+        for t, dv in zip(times, sizes):
+            if not (isinstance(t, (int, float)) and math.isfinite(t) and t >= 0):
+                raise ValueError(f'tap time must be finite and >= 0, got {t!r}')
+            if not (isinstance(dv, (int, float)) and math.isfinite(dv) and abs(dv) <= MAX_TAP):
+                raise ValueError(f'tap size must be finite and |size| <= {MAX_TAP} rad/s, got {dv!r}')
+        self._taps = sorted((float(t), float(dv)) for t, dv in zip(times, sizes))
 
     # ------------------------------------------------------------- inputs
     def command(self, seq: int, u: float) -> tuple[bool, str]:
@@ -118,6 +132,8 @@ class SimCore:
     def advance(self) -> float:
         """Integrate [t_k, t_k+1) and move to sample k+1; returns the command held."""
         u = self.held_command()
+        while self._taps and self._taps[0][0] <= self.plant.t + 1e-9:
+            self.plant.tap(self._taps.pop(0)[1])
         if self._torque_until >= 0.0 and self.plant.t >= self._torque_until - 1e-12:
             self.plant.disturbance = 0.0
             self._torque_until = -1.0

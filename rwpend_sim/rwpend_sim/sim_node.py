@@ -34,7 +34,9 @@ from rwpend_sim.sim_core import SimCore
 PARAMS = {
     'lockstep': (False, 'lockstep time mode: publish /clock, wait for the command of each sample'),
     'lockstep_timeout': (0.5, 'lockstep: wall seconds to wait for the command of a sample'),
-    'lockstep_start_delay': (0.5, 'lockstep: wall seconds to wait after the loop is connected'),
+    'start.delay': (0.5, 'wall seconds to wait after the loop is connected, before sample 0'),
+    'start.encoders_subscribers': (1, 'subscribers of encoders to wait for before sample 0 (2 with a recorder)'),
+    'start.true_state_subscribers': (0, 'subscribers of sim/true_state to wait for before sample 0'),
     'command_timeout_samples': (3, 'samples without a fresh command before u = 0'),
     'initial.theta': (0.0, 'initial pendulum angle (rad, 0 hanging, pi upright)'),
     'initial.theta_dot': (0.0, 'initial pendulum angular velocity (rad/s)'),
@@ -45,6 +47,8 @@ PARAMS = {
     'pwm': (True, 'PWM duty quantization of the command'),
     'back_emf': (True, 'back-EMF cut-off (2.13)'),
     'publish_true_state': (True, 'publish sim/true_state every sample'),
+    'taps.times': ([-1.0], 'scripted taps: simulated times (s); [-1.0] = none'),
+    'taps.sizes': ([0.0], 'scripted taps: theta_dot jumps (rad/s), one per time'),
     'duration': (0.0, 'stop after this many simulated seconds (0 = run until stopped)'),
     'frame_id': ('rwpend', 'frame_id of the published headers'),
     'diagnostics_period': (1.0, 'seconds between /diagnostics messages'),
@@ -66,7 +70,11 @@ class SimNode(Node):
                                 wheel_angle=p['initial.wheel_angle'], wheel_rate=p['initial.wheel_rate'],
                                 friction=p['friction'], motor_lag=p['motor_lag'], pwm=p['pwm'],
                                 back_emf=p['back_emf'])
-        except ValueError as exc:
+            times, sizes = list(p['taps.times']), list(p['taps.sizes'])
+            if times == [-1.0]:
+                times, sizes = [], []
+            self.core.schedule_taps(times, sizes)
+        except (ValueError, TypeError) as exc:
             raise ConfigError(str(exc)) from exc
         self.p = p
         self.h = self.rig.sample_period
@@ -160,7 +168,22 @@ class SimNode(Node):
         d = self.p['duration']
         return d > 0 and self.core.plant.t >= d - 1e-9
 
+    def wait_for_loop(self, need_command: bool) -> None:
+        """Hold sample 0 until the estimator (and a recorder, if asked) are subscribed, so
+        nothing of the run is missed; then let discovery settle."""
+        n_enc = self.p['start.encoders_subscribers']
+        n_true = self.p['start.true_state_subscribers']
+        while not self.stop.is_set():
+            if (self.pub_enc.get_subscription_count() >= n_enc
+                    and self.pub_true.get_subscription_count() >= n_true
+                    and (not need_command or self.count_publishers(self.resolve_topic_name('command')) > 0)):
+                break
+            time.sleep(0.02)
+        time.sleep(self.p['start.delay'])
+        self.wall_start = time.monotonic()
+
     def loop_realtime(self) -> None:
+        self.wait_for_loop(need_command=False)
         period_ns = int(round(self.h * 1e9))
         t0_ros = self.get_clock().now().nanoseconds
         t0 = time.monotonic_ns()
@@ -180,13 +203,7 @@ class SimNode(Node):
         self.finish()
 
     def loop_lockstep(self) -> None:
-        # wait until the loop is connected, then let discovery settle
-        while not self.stop.is_set():
-            if self.pub_enc.get_subscription_count() > 0 and self.count_publishers(
-                    self.resolve_topic_name('command')) > 0:
-                break
-            time.sleep(0.02)
-        time.sleep(self.p['lockstep_start_delay'])
+        self.wait_for_loop(need_command=True)
         period_ns = int(round(self.h * 1e9))
         timeout = self.p['lockstep_timeout']
         while not self.stop.is_set() and not self.done():

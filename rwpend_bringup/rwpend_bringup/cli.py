@@ -1,0 +1,455 @@
+"""``./rwpend`` -- the project's command line (run from the repository root; no sourcing needed).
+
+Commands (``./rwpend COMMAND --help`` for each):
+
+  up        run the stack: plant (simulator or serial driver), estimator, controller [, recorder]
+  node      run one node (like ``ros2 run``): sim, estimator, controller, driver
+  demo      swing-up, catch, balance and a tap on the simulator; bag + plot + metrics
+  param     get / set / list / dump / describe parameters of a running node (standard services)
+  mode      set the controller's mode (off, wheel_velocity, wheel_angle, balance, swingup, auto)
+  tap       tap the simulated pendulum (theta_dot jumps by DV rad/s)
+  estop     raise the latched e-stop (``--clear`` to clear it)
+  gains     the book's gain designs, and applying them to a running controller
+  record    record topics to a rosbag2 MCAP bag
+  play      replay a bag
+  bag info  topics, counts, rates, seq gaps of a bag
+  analyze   metrics and plots of a run
+  emulate   the rig's microcontroller on a pseudo-terminal (for --plant serial:PATH)
+  bench     the real-time / lockstep benchmark (JSON in bench_out/)
+  exec      run any command inside the project's ROS environment (handled by ./rwpend)
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+from .launch import DEFAULT_NS, Launcher, NodeSpec
+
+ROOT = Path(os.environ.get('RWPEND_ROOT', Path(__file__).resolve().parents[2]))
+MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto')
+NODE_MODULES = {
+    'sim': 'rwpend_sim.sim_node',
+    'estimator': 'rwpend_estimation.estimator_node',
+    'controller': 'rwpend_control.controller_node',
+    'driver': 'rwpend_driver.driver_node',
+}
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        print(f'{self.prog}: error: {message}', file=sys.stderr)
+        raise SystemExit(2)
+
+
+def fail(prog: str, msg: str, status: int = 2) -> int:
+    print(f'{prog}: error: {msg}', file=sys.stderr, flush=True)
+    return status
+
+
+def rig_file() -> Path:
+    from rwpend_model.rig import default_rig_file
+    return default_rig_file()
+
+
+def stack_file() -> Path:
+    return Path(__file__).resolve().parent / 'config' / 'stack.yaml'
+
+
+def parse_assignment(text: str) -> tuple[str, str, object]:
+    """'controller.balance.kpp=-280' -> ('controller', 'balance.kpp', -280.0 as YAML reads it)."""
+    import yaml
+    if '=' not in text:
+        raise ValueError(f'expected NODE.PARAM=VALUE, got {text!r}')
+    lhs, rhs = text.split('=', 1)
+    if '.' not in lhs:
+        raise ValueError(f'expected NODE.PARAM=VALUE, got {text!r}')
+    node, name = lhs.split('.', 1)
+    if node not in ('sim', 'estimator', 'controller', 'driver', 'rig') or not name:
+        raise ValueError(f'unknown node {node!r} in {text!r} (sim, estimator, controller, driver, rig)')
+    try:
+        value = yaml.safe_load(rhs)
+    except yaml.YAMLError as exc:
+        raise ValueError(f'cannot read the value of {text!r}: {exc}') from exc
+    if value is None or isinstance(value, dict):
+        raise ValueError(f'no usable value in {text!r}')
+    return node, name, value
+
+
+def namespace_arg(ns: str) -> str:
+    ns = '/' + ns.strip('/')
+    import re
+    if ns != '/' and not re.fullmatch(r'(/[A-Za-z][A-Za-z0-9_]*)+', ns):
+        raise argparse.ArgumentTypeError(f'invalid namespace {ns!r} (letters, digits, _; e.g. /rig2)')
+    return ns
+
+
+# ------------------------------------------------------------------ up
+def add_stack_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument('--plant', default='sim', help="'sim' (default) or 'serial:PORT' (the real rig, "
+                   'or the emulator\'s path)')
+    p.add_argument('--lockstep', action='store_true',
+                   help='simulator in lockstep with the loop (sim time on /clock, deterministic)')
+    p.add_argument('--duration', type=float, default=None,
+                   help='stop after S seconds (simulated in lockstep, wall otherwise)')
+    p.add_argument('--mode', choices=MODES, default=None, help='controller mode at start')
+    p.add_argument('--estimator', default=None, help='estimator at start (see estimator node)')
+    p.add_argument('--record', metavar='DIR', default=None, help='record every topic to this bag')
+    p.add_argument('--params', action='append', default=[], metavar='FILE',
+                   help='extra ROS 2 params file for the nodes (later files win)')
+    p.add_argument('--set', action='append', default=[], metavar='NODE.PARAM=VALUE',
+                   help="parameter override, e.g. controller.balance.design.omega0=2wp, rig.g=9.91")
+    p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS, help=f'namespace of the rig (default {DEFAULT_NS})')
+    p.add_argument('--theta0', type=float, default=None, help='sim: initial pendulum angle (rad, 0 = down)')
+    p.add_argument('--tap', action='append', default=[], metavar='T:DV',
+                   help='sim: scripted tap at simulated time T s, theta_dot += DV rad/s')
+    p.add_argument('--h', type=float, default=None, help='sample period (s), all nodes (rig.sample_period)')
+    p.add_argument('--no-controller', action='store_true', help='do not start the controller')
+
+
+def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
+    """Node specs and params files from the ``up`` arguments; raises ValueError with the reason."""
+    params: dict[str, dict] = {'sim': {}, 'estimator': {}, 'controller': {}, 'driver': {}}
+    rig: dict = {}
+    for f in a.params:
+        from rwpend_model.rig import read_params_file
+        if not Path(f).is_file():
+            raise ValueError(f'params file {f} does not exist')
+        read_params_file(f)   # validates the format
+    for s in a.set:
+        node, name, value = parse_assignment(s)
+        if node == 'rig':
+            rig['rig.' + name] = value
+        else:
+            params[node][name] = value
+    if a.h is not None:
+        rig['rig.sample_period'] = float(a.h)
+    if rig:
+        from rwpend_model.rig import load_rig
+        load_rig(overrides=rig)   # validated now, with the reason, before anything starts
+    if a.duration is not None and not (math.isfinite(a.duration) and a.duration > 0):
+        raise ValueError(f'--duration must be > 0, got {a.duration}')
+    if a.mode:
+        params['controller']['mode'] = a.mode
+    if a.estimator:
+        params['estimator']['estimator'] = a.estimator
+    plant = a.plant
+    if plant == 'sim':
+        if a.lockstep:
+            params['sim']['lockstep'] = True
+            if a.duration:
+                params['sim']['duration'] = float(a.duration)
+        if a.theta0 is not None:
+            params['sim']['initial.theta'] = float(a.theta0)
+        if a.tap:
+            times, sizes = [], []
+            for t in a.tap:
+                try:
+                    ts, dvs = t.split(':')
+                    times.append(float(ts))
+                    sizes.append(float(dvs))
+                except ValueError:
+                    raise ValueError(f'--tap expects T:DV (e.g. 9:0.5), got {t!r}') from None
+            params['sim']['taps.times'] = times
+            params['sim']['taps.sizes'] = sizes
+        plant_spec = NodeSpec('sim', NODE_MODULES['sim'], {**rig, **params['sim']}, stop_rank=3)
+    elif plant.startswith('serial:') and len(plant) > 7:
+        if a.lockstep or a.tap or a.theta0 is not None:
+            raise ValueError('--lockstep, --tap and --theta0 need the simulator (--plant sim)')
+        params['driver']['port'] = plant[7:]
+        plant_spec = NodeSpec('driver', NODE_MODULES['driver'], {**rig, **params['driver']}, stop_rank=3)
+    else:
+        raise ValueError(f"--plant must be 'sim' or 'serial:PORT', got {plant!r}")
+    sim_time = {'use_sim_time': True} if a.lockstep else {}
+    specs = [plant_spec,
+             NodeSpec('estimator', NODE_MODULES['estimator'], {**rig, **sim_time, **params['estimator']},
+                      stop_rank=2)]
+    if not a.no_controller:
+        specs.append(NodeSpec('controller', NODE_MODULES['controller'],
+                              {**rig, **sim_time, **params['controller']}, stop_rank=1))
+    if a.record:
+        if plant == 'sim':   # the simulator holds sample 0 until the recorder listens
+            plant_spec.params.update({'start.encoders_subscribers': 2, 'start.true_state_subscribers': 1})
+        out = Path(a.record)
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise ValueError(f'{out} already exists (choose a new bag directory)')
+        if not out.parent.exists():
+            raise ValueError(f'{out.parent} does not exist')
+        specs.append(NodeSpec('recorder', 'rwpend_bag.cli', args=['record', '-o', str(out), '--all'],
+                              ros_args=False, stop_rank=9))
+    files = [str(rig_file()), str(stack_file()), *map(str, a.params)]
+    return specs, files
+
+
+def up_main(argv) -> int:
+    p = Parser(prog='rwpend up', description='Run the stack (Ctrl-C stops it: controller first, '
+               'recorder last).')
+    add_stack_args(p)
+    a = p.parse_args(argv)
+    try:
+        specs, files = build_stack(a, p.prog)
+    except ValueError as exc:
+        return fail(p.prog, str(exc))
+    return run_stack(a, specs, files)
+
+
+def run_stack(a, specs, files, on_started=None) -> int:
+    launcher = Launcher(specs, namespace=a.ns, params_files=files)
+    names = ', '.join(s.name for s in specs)
+    print(f'rwpend: starting {names} in {a.ns} (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}, '
+          f'discovery {os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")})', flush=True)
+    if a.lockstep and a.plant == 'sim':
+        # the simulator exits by itself at --duration simulated seconds; wall time is unbounded
+        status = launcher.run(None, on_started=on_started)
+    else:
+        status = launcher.run(a.duration, on_started=on_started)
+    print(f'rwpend: stopped ({launcher.reason})', flush=True)
+    return status
+
+
+def node_main(argv) -> int:
+    if not argv or argv[0] in ('-h', '--help') or argv[0] not in NODE_MODULES:
+        print('usage: rwpend node {' + ','.join(NODE_MODULES) + '} [--ros-args ...]\n'
+              'Runs one node with the rig YAML and the stack defaults loaded, in namespace '
+              f'{DEFAULT_NS} unless --ros-args -r __ns:=... is given.', file=sys.stderr)
+        return 0 if argv and argv[0] in ('-h', '--help') else 2
+    name, rest = argv[0], argv[1:]
+    ros = rest[rest.index('--ros-args') + 1:] if '--ros-args' in rest else []
+    ns = [] if any(x.startswith('__ns:=') for x in ros) else ['-r', f'__ns:={DEFAULT_NS}']
+    cmd = [sys.executable, '-u', '-m', NODE_MODULES[name], '--ros-args', *ns,
+           '--params-file', str(rig_file()), '--params-file', str(stack_file()), *ros]
+    os.execv(sys.executable, cmd)
+    return 0  # pragma: no cover
+
+
+# ------------------------------------------------------------------ demo
+def demo_main(argv) -> int:
+    p = Parser(prog='rwpend demo', description='Swing-up, catch, balance and a tap on the simulator '
+               '(lockstep, deterministic); writes a bag, a plot and metrics to OUT.')
+    p.add_argument('-o', '--out', default=str(ROOT / 'demo_out'), help='output directory (default demo_out)')
+    p.add_argument('--duration', type=float, default=16.0, help='simulated seconds (default 16)')
+    p.add_argument('--tap', default='11:0.6', metavar='T:DV', help='tap (default 11:0.6)')
+    p.add_argument('--realtime', action='store_true', help='run in real time instead of lockstep')
+    a = p.parse_args(argv)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    bag = out / time.strftime('demo_%Y%m%d_%H%M%S')
+    up_args = ['--mode', 'auto', '--duration', str(a.duration), '--tap', a.tap, '--record', str(bag)]
+    if not a.realtime:
+        up_args.append('--lockstep')
+    sp = Parser(prog='rwpend demo')
+    add_stack_args(sp)
+    ua = sp.parse_args(up_args)
+    try:
+        specs, files = build_stack(ua, p.prog)
+    except ValueError as exc:
+        return fail(p.prog, str(exc))
+    t0 = time.monotonic()
+    status = run_stack(ua, specs, files)
+    wall = time.monotonic() - t0
+    if status != 0:
+        return fail(p.prog, 'the stack did not run cleanly (see above)', 1)
+    from rwpend_bag.cli import analyze_main
+    plot = out / 'demo.png'
+    metrics_file = out / 'metrics.json'
+    print(f'rwpend demo: analysing {bag}', flush=True)
+    import contextlib
+    import io
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        st = analyze_main([str(bag), '--plot', str(plot), '--json'])
+    if st != 0:
+        print(buf.getvalue())
+        return fail(p.prog, f'analysis of {bag} failed', 1)
+    metrics = json.loads(buf.getvalue())
+    metrics_file.write_text(json.dumps(metrics, indent=2) + '\n')
+    print(json.dumps(metrics, indent=2))
+    print(f'rwpend demo: {a.duration:g} s simulated in {wall:.1f} s wall\n'
+          f'  bag:     {bag}\n  plot:    {plot}\n  metrics: {metrics_file}', flush=True)
+    return 0
+
+
+# ------------------------------------------------------------------ param / mode / tap / estop
+def _tool(ns):
+    from .rostools import RosTool
+    return RosTool(ns)
+
+
+def param_main(argv) -> int:
+    p = Parser(prog='rwpend param', description='Parameters of a running node through the standard '
+               'ROS 2 parameter services (what `ros2 param` does). NODE is relative to --ns '
+               '(controller -> /rwpend/controller) or absolute.')
+    p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS)
+    sub = p.add_subparsers(dest='cmd', required=True)
+    s = sub.add_parser('list', help='parameter names')
+    s.add_argument('node')
+    s = sub.add_parser('get', help='values')
+    s.add_argument('node')
+    s.add_argument('names', nargs='+')
+    s = sub.add_parser('set', help='set one or more NAME VALUE pairs (validated by the node)')
+    s.add_argument('node')
+    s.add_argument('pairs', nargs='+', metavar='NAME VALUE')
+    s = sub.add_parser('dump', help='all parameters as a ROS 2 params file')
+    s.add_argument('node')
+    s = sub.add_parser('describe', help='descriptions and constraints')
+    s.add_argument('node')
+    s.add_argument('names', nargs='+')
+    a = p.parse_args(argv)
+    from .rostools import ToolError, format_value, parse_value
+    if a.cmd == 'set' and len(a.pairs) % 2:
+        return fail(p.prog, 'set expects NAME VALUE pairs')
+    try:
+        with _tool(a.ns) as t:
+            if a.cmd == 'list':
+                print('\n'.join(t.list_params(a.node)))
+            elif a.cmd == 'get':
+                for n, v in t.get_params(a.node, a.names).items():
+                    print(f'{n}: {format_value(v)}')
+            elif a.cmd == 'dump':
+                print(t.dump(a.node), end='')
+            elif a.cmd == 'describe':
+                for d in t.describe(a.node, a.names):
+                    ro = ' (read-only)' if d.read_only else ''
+                    print(f'{d.name}{ro}: {d.description}')
+            else:
+                values = {a.pairs[i]: parse_value(a.pairs[i + 1]) for i in range(0, len(a.pairs), 2)}
+                results = t.set_params(a.node, values)
+                bad = 0
+                for name, ok, reason in results:
+                    if ok:
+                        print(f'{name}: set')
+                    else:
+                        bad += 1
+                        print(f'{name}: refused: {reason or "no reason given"}', file=sys.stderr)
+                return 1 if bad else 0
+    except ToolError as exc:
+        return fail(p.prog, str(exc), 1)
+    return 0
+
+
+def mode_main(argv) -> int:
+    p = Parser(prog='rwpend mode', description='Set the controller mode (controller/set_mode).')
+    p.add_argument('mode', choices=MODES)
+    p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS)
+    a = p.parse_args(argv)
+    from .rostools import ToolError
+    try:
+        with _tool(a.ns) as t:
+            ok, msg = t.set_mode(a.mode)
+    except ToolError as exc:
+        return fail(p.prog, str(exc), 1)
+    print(msg) if ok else print(f'refused: {msg}', file=sys.stderr)
+    return 0 if ok else 1
+
+
+def tap_main(argv) -> int:
+    p = Parser(prog='rwpend tap', description='Tap the simulated pendulum (sim/disturb): theta_dot += DV; '
+               'or, with --torque, apply a torque of DV units for --seconds.')
+    p.add_argument('dv', type=float, help='rad/s (or control units with --torque)')
+    p.add_argument('--torque', action='store_true')
+    p.add_argument('--seconds', type=float, default=0.5)
+    p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS)
+    a = p.parse_args(argv)
+    from .rostools import ToolError
+    try:
+        with _tool(a.ns) as t:
+            ok, msg = t.disturb(1 if a.torque else 0, a.dv, a.seconds if a.torque else 0.0)
+    except ToolError as exc:
+        return fail(p.prog, str(exc), 1)
+    print(msg) if ok else print(f'refused: {msg}', file=sys.stderr)
+    return 0 if ok else 1
+
+
+def estop_main(argv) -> int:
+    p = Parser(prog='rwpend estop', description='Raise the latched e-stop on the plant/driver (motor '
+               'held at zero whatever the controller sends), or clear it.')
+    p.add_argument('--clear', action='store_true')
+    p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS)
+    a = p.parse_args(argv)
+    from .rostools import ToolError
+    try:
+        with _tool(a.ns) as t:
+            results = t.estop(not a.clear)
+    except ToolError as exc:
+        return fail(p.prog, str(exc), 1)
+    bad = 0
+    for name, ok, msg in results:
+        print(f'{name}: {msg}')
+        bad += not ok
+    return 1 if bad else 0
+
+
+# ------------------------------------------------------------------ delegated commands
+def gains_main(argv) -> int:
+    from rwpend_control.gains_cli import main
+    return main(argv)
+
+
+def bag_main(argv) -> int:
+    from rwpend_bag import cli
+    if not argv or argv[0] != 'info':
+        print('usage: rwpend bag info BAG', file=sys.stderr)
+        return 2
+    return cli.info_main(argv[1:])
+
+
+def record_main(argv) -> int:
+    from rwpend_bag.cli import record_main as m
+    return m(argv)
+
+
+def play_main(argv) -> int:
+    from rwpend_bag.cli import play_main as m
+    return m(argv)
+
+
+def analyze_main(argv) -> int:
+    from rwpend_bag.cli import analyze_main as m
+    return m(argv)
+
+
+def emulate_main(argv) -> int:
+    from rwpend_driver.emulator import main
+    return main(argv)
+
+
+def bench_main(argv) -> int:
+    try:
+        from .bench import main
+    except ImportError:
+        return fail('rwpend bench', 'the benchmark is not available in this version', 1)
+    return main(argv)
+
+
+COMMANDS = {
+    'up': up_main, 'node': node_main, 'demo': demo_main, 'param': param_main, 'mode': mode_main,
+    'tap': tap_main, 'estop': estop_main, 'gains': gains_main, 'record': record_main,
+    'play': play_main, 'bag': bag_main, 'analyze': analyze_main, 'emulate': emulate_main,
+    'bench': bench_main,
+}
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not argv or argv[0] in ('-h', '--help', 'help'):
+        print(__doc__.strip().replace('``', '`'))
+        return 0 if argv else 2
+    cmd = argv[0]
+    if cmd not in COMMANDS:
+        print(f'rwpend: unknown command {cmd!r}; `./rwpend --help` lists them', file=sys.stderr)
+        return 2
+    try:
+        return COMMANDS[cmd](argv[1:])
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())
