@@ -65,7 +65,7 @@ def _record(argv) -> int:
     from rwpend_ros.common import run_node
 
     from .recorder_node import Recorder
-    return run_node(lambda: Recorder(str(out), topics, a.all))
+    return run_node(lambda: Recorder(str(out), topics, a.all), args=[])
 
 
 # ------------------------------------------------------------------ info

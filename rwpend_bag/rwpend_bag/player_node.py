@@ -81,7 +81,7 @@ class Player(Node):
 
 
 def run(sched: Schedule, rate: float, loop: bool, clock: bool, wait: float = 2.0) -> int:
-    rclpy.init()
+    rclpy.init(args=[])  # not sys.argv: its --remap a:=b would become rcl remap rules
     node = None
     try:
         node = Player(sched, clock)

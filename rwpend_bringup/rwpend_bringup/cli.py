@@ -96,7 +96,8 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--lockstep', action='store_true',
                    help='simulator in lockstep with the loop (sim time on /clock, deterministic)')
     p.add_argument('--duration', type=float, default=None,
-                   help='stop after S seconds (simulated in lockstep, wall otherwise)')
+                   help='stop after S seconds of the run (simulated time from the first sample with '
+                   'the simulator, wall time with a serial plant)')
     p.add_argument('--mode', choices=MODES, default=None, help='controller mode at start')
     p.add_argument('--estimator', default=None, help='estimator at start (see estimator node)')
     p.add_argument('--record', metavar='DIR', default=None, help='record every topic to this bag')
@@ -110,6 +111,9 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='sim: scripted tap at simulated time T s, theta_dot += DV rad/s')
     p.add_argument('--h', type=float, default=None, help='sample period (s), all nodes (rig.sample_period)')
     p.add_argument('--no-controller', action='store_true', help='do not start the controller')
+    p.add_argument('--composed', action='store_true',
+                   help='plant (simulator), estimator and controller as nodes of ONE process on one '
+                   'executor (the recorder stays a process of its own); see PERFORMANCE.md')
 
 
 def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
@@ -142,8 +146,8 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     if plant == 'sim':
         if a.lockstep:
             params['sim']['lockstep'] = True
-            if a.duration:
-                params['sim']['duration'] = float(a.duration)
+        if a.duration:   # counted by the simulator from sample 0 (which waits for the loop)
+            params['sim']['duration'] = float(a.duration)
         if a.theta0 is not None:
             params['sim']['initial.theta'] = float(a.theta0)
         if a.tap:
@@ -182,6 +186,14 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
             raise ValueError(f'{out.parent} does not exist')
         specs.append(NodeSpec('recorder', 'rwpend_bag.cli', args=['record', '-o', str(out), '--all'],
                               ros_args=False, stop_rank=9))
+    if getattr(a, 'composed', False):
+        if plant != 'sim':
+            raise ValueError('--composed needs the simulator (--plant sim): the driver runs in its '
+                             'own process')
+        nodes = [s for s in specs if s.module in NODE_MODULES.values()]
+        specs = [NodeSpec('stack', 'rwpend_bringup.composed', args=[s.name for s in nodes],
+                          node_params={s.name: s.params for s in nodes}, stop_rank=3),
+                 *[s for s in specs if s not in nodes]]
     files = [str(rig_file()), str(stack_file()), *map(str, a.params)]
     return specs, files
 
@@ -203,9 +215,11 @@ def run_stack(a, specs, files, on_started=None) -> int:
     names = ', '.join(s.name for s in specs)
     print(f'rwpend: starting {names} in {a.ns} (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}, '
           f'discovery {os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")})', flush=True)
-    if a.lockstep and a.plant == 'sim':
-        # the simulator exits by itself at --duration simulated seconds; wall time is unbounded
-        status = launcher.run(None, on_started=on_started)
+    if a.plant == 'sim':
+        # the simulator exits by itself after --duration s from its sample 0 (simulated time in
+        # lockstep); the wall-clock bound only catches a stack that never starts
+        bound = None if a.duration is None else 120.0 + (20.0 if a.lockstep else 1.5) * a.duration
+        status = launcher.run(bound, on_started=on_started)
     else:
         status = launcher.run(a.duration, on_started=on_started)
     print(f'rwpend: stopped ({launcher.reason})', flush=True)
@@ -291,7 +305,8 @@ def param_main(argv) -> int:
     s = sub.add_parser('get', help='values')
     s.add_argument('node')
     s.add_argument('names', nargs='+')
-    s = sub.add_parser('set', help='set one or more NAME VALUE pairs (validated by the node)')
+    s = sub.add_parser('set', help='set NAME VALUE [NAME VALUE ...] (validated by the node; several '
+                       'pairs are set atomically: all or nothing)')
     s.add_argument('node')
     s.add_argument('pairs', nargs='+', metavar='NAME VALUE')
     s = sub.add_parser('dump', help='all parameters as a ROS 2 params file')
@@ -318,6 +333,13 @@ def param_main(argv) -> int:
                     print(f'{d.name}{ro}: {d.description}')
             else:
                 values = {a.pairs[i]: parse_value(a.pairs[i + 1]) for i in range(0, len(a.pairs), 2)}
+                if len(values) > 1:   # a set of gains is validated as a whole: all or nothing
+                    ok, reason = t.set_params_atomically(a.node, values)
+                    if not ok:
+                        print(f'refused (nothing changed): {reason or "no reason given"}', file=sys.stderr)
+                        return 1
+                    print('set: ' + ', '.join(values))
+                    return 0
                 results = t.set_params(a.node, values)
                 bad = 0
                 for name, ok, reason in results:

@@ -13,7 +13,8 @@ import rclpy
 import yaml
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
-from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters, SetParameters
+from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters, SetParameters,
+                                SetParametersAtomically)
 from rclpy.node import Node
 
 #: ParameterType -> field of ParameterValue
@@ -87,7 +88,7 @@ class RosTool:
         self.timeout = timeout
 
     def __enter__(self) -> 'RosTool':
-        rclpy.init()
+        rclpy.init(args=[])  # not sys.argv (a value like a:=b would be read as a remap)
         self.node = Node('rwpend_cli', namespace='/', start_parameter_services=False)
         return self
 
@@ -141,6 +142,13 @@ class RosTool:
         r = self.call(SetParameters, self.fqn(node) + '/set_parameters', req)
         return [(n, res.successful, res.reason) for n, res in zip(values, r.results)]
 
+    def set_params_atomically(self, node: str, values: dict[str, ParameterValue]) -> tuple[bool, str]:
+        """All or nothing (a gain set is validated as a whole by the controller)."""
+        req = SetParametersAtomically.Request(
+            parameters=[ParameterMsg(name=n, value=v) for n, v in values.items()])
+        r = self.call(SetParametersAtomically, self.fqn(node) + '/set_parameters_atomically', req)
+        return r.result.successful, r.result.reason
+
     def dump(self, node: str) -> str:
         """The node's parameters as a ROS 2 params file (loadable with --params-file)."""
         names = self.list_params(node)
@@ -170,7 +178,7 @@ class RosTool:
         """Raise or clear the latched e-stop on every plant-side node that serves ``~/estop``."""
         from std_srvs.srv import SetBool
         targets = []
-        end = time.monotonic() + min(self.timeout, 2.0)
+        end = time.monotonic() + self.timeout   # discovery of a loaded host can take seconds
         while time.monotonic() < end:
             names = [n for n, types in self.node.get_service_names_and_types()
                      if n.startswith(self.namespace + '/') and n.endswith('/estop')
@@ -179,6 +187,7 @@ class RosTool:
                 targets = sorted(set(names))
                 break
             rclpy.spin_once(self.node, timeout_sec=0.1)
+            time.sleep(0.05)
         if not targets:
             raise ToolError(f'no e-stop service under {self.namespace or "/"} (is the stack running?)')
         out = []

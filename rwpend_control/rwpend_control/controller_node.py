@@ -33,7 +33,7 @@ from rclpy.parameter import Parameter
 
 from rwpend_msgs.msg import ControllerStatus, MotorCommand, StateEstimate
 from rwpend_msgs.srv import SetMode
-from rwpend_ros.common import QOS_CONTROL, QOS_STATUS, ConfigError, declare_rig, diagnostic_status, run_node
+from rwpend_ros.common import QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status, run_node
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, design_group, gains_from_design)
 
@@ -96,7 +96,7 @@ class ControllerNode(Node):
         self._pending_params: list[Parameter] = []
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
-        self.pub_cmd = self.create_publisher(MotorCommand, 'command', QOS_CONTROL)
+        self.pub_cmd = self.create_publisher(MotorCommand, 'command', QOS_CONTROL_PUB)
         self.pub_status = self.create_publisher(ControllerStatus, 'controller/status', QOS_STATUS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.create_subscription(StateEstimate, 'state', self.on_state, QOS_CONTROL)

@@ -7,7 +7,9 @@
 DESIGN: pd (4.3), pi (3.15-3.16), wheel_pd (3.18), pdd (4.11), pdpd (4.15), patch (6.3).
 ``--book-g`` uses the book's g = 9.91 (reproduces its printed numbers, ERRATA E01); otherwise
 the rig YAML (or ``--rig FILE``).  The printed parameter names are those of the ``controller``
-node (apply them with the param tool).  Exit status 2 on bad arguments.
+node; ``--apply`` sets them on the running controller (all in one atomic request, validated
+by the node: refused as a whole, with the reason, if invalid).  Exit status 2 on bad arguments,
+1 when the controller refuses or cannot be reached.
 """
 from __future__ import annotations
 
@@ -51,6 +53,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--book-g', action='store_true', help="use the book's g = 9.91 (E01)")
     p.add_argument('--rig', help='rig parameters YAML (default: the shipped rig.yaml)')
     p.add_argument('--json', action='store_true', help='print JSON')
+    p.add_argument('--apply', action='store_true',
+                   help='set the gains on the running controller (validated there; refused as a whole)')
+    p.add_argument('--ns', default='/rwpend', help='namespace of the running rig (with --apply)')
     return p
 
 
@@ -130,6 +135,25 @@ def main(argv: list[str] | None = None) -> int:
     print(out['reason'] if out['stable'] else f'NOT STABLE: {out["reason"]}')
     if out['design'] == 'pd':
         print('  (the controller accepts it as balance gains only with allow_wheel_drift:=true)')
+    if args.apply:
+        return apply(out['params'], args.ns)
+    return 0
+
+
+def apply(params: dict, namespace: str) -> int:
+    """Set ``params`` on the running controller atomically (SetParametersAtomically)."""
+    from rwpend_bringup.rostools import RosTool, ToolError, to_parameter_value
+    try:
+        with RosTool(namespace) as t:
+            ok, reason = t.set_params_atomically('controller', {n: to_parameter_value(float(v))
+                                                                for n, v in params.items()})
+    except ToolError as exc:
+        print(f'rwpend gains: error: {exc}', file=sys.stderr)
+        return 1
+    if not ok:
+        print(f'rwpend gains: the controller refused the gains: {reason}', file=sys.stderr)
+        return 1
+    print(f'applied to {namespace.rstrip("/")}/controller')
     return 0
 
 

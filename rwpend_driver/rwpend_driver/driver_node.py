@@ -19,7 +19,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand
-from rwpend_ros.common import QOS_CONTROL, QOS_STATUS, ConfigError, diagnostic_status, run_node
+from rwpend_ros.common import QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, diagnostic_status, run_node
 
 from .link import DriverLink, LinkConfig
 
@@ -70,7 +70,7 @@ class DriverNode(LifecycleNode):
         self.last_configure_error = ''
         self.enc = EncoderCounts()
         self.enc.header.frame_id = p['frame_id']
-        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL)
+        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
         self.create_timer(p['diagnostics_period'], self.publish_diagnostics)

@@ -29,7 +29,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
-from rwpend_ros.common import (QOS_CONTROL, QOS_STATUS, ConfigError, declare_rig, diagnostic_status,
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status,
                                run_node)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
                                           make_estimator, switch_estimator)
@@ -84,8 +84,9 @@ class EstimatorNode(Node):
                 math.isfinite(period) and period > 0):
             raise ConfigError(f'diagnostics_period must be a number > 0, got {period!r}')
         self.est = make_estimator(None, self.rig, self.config)
-        self.u = 0.0
+        self.u = 0.0             # latest command received (clamped), for diagnostics
         self.u_seq = -1          # seq answered by the latest command
+        self.commands: dict[int, float] = {}   # recent commands by the seq they answer
         self.pending: EncoderCounts | None = None
         self.deferred = 0        # samples that waited for their command
         self.u_max = self.rig.u_max
@@ -100,8 +101,8 @@ class EstimatorNode(Node):
 
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
-        self.pub_state = self.create_publisher(StateEstimate, 'state', QOS_CONTROL)
-        self.pub_joints = self.create_publisher(JointState, 'joint_states', QOS_CONTROL)
+        self.pub_state = self.create_publisher(StateEstimate, 'state', QOS_CONTROL_PUB)
+        self.pub_joints = self.create_publisher(JointState, 'joint_states', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.create_subscription(EncoderCounts, 'encoders', self.on_encoders, QOS_CONTROL)
         self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
@@ -155,7 +156,11 @@ class EstimatorNode(Node):
             return
         um = self.u_max
         self.u = um if u > um else (-um if u < -um else u)
-        self.u_seq = max(self.u_seq, int(msg.seq))
+        seq = int(msg.seq)
+        self.commands[seq] = self.u
+        if len(self.commands) > 64:
+            del self.commands[next(iter(self.commands))]
+        self.u_seq = max(self.u_seq, seq)
         p = self.pending
         if p is not None and self.u_seq >= p.seq - 1:
             self.pending = None
@@ -177,9 +182,24 @@ class EstimatorNode(Node):
             return
         self.process(msg)
 
+    def command_for(self, k: int) -> float:
+        """The u held over [t_{k-1}, t_k): the command answering sample k-1, else the newest one
+        answering an earlier sample (the amplifier holds it), else 0. Chosen by seq, not by
+        arrival order, so a replayed stream gives the live estimates whatever the interleaving
+        of the two topics."""
+        u = self.commands.get(k - 1)
+        if u is not None:
+            return u
+        older = [s for s in self.commands if s < k]
+        return self.commands[max(older)] if older else 0.0
+
     def process(self, msg: EncoderCounts) -> None:
+        if self.last_seq is not None and msg.seq < self.last_seq:
+            # the plant restarted its sample counter (driver reconnect, simulator restart)
+            self.commands.clear()
+            self.u_seq = -1
         try:
-            e = self.est.step(msg.pendulum_counts, msg.motor_counts, self.u)
+            e = self.est.step(msg.pendulum_counts, msg.motor_counts, self.command_for(int(msg.seq)))
         except ValueError as exc:
             self.refused_samples += 1
             self.last_error = f'seq {msg.seq}: {exc}'

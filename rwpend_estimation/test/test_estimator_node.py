@@ -60,6 +60,9 @@ def test_node_publishes_refuses_and_switches(graph):
         m.header.stamp.sec = 100 + k
         pub_enc.publish(m)
         assert spin_until(ex, lambda: len(states) == k + 1 and len(joints) == k + 1)
+        # answer the sample like a controller (the estimator waits for command k-1)
+        pub_cmd.publish(MotorCommand(seq=k, u=25.0))
+        assert spin_until(ex, lambda: node.u_seq == k)
     s = states[-1]
     assert (s.seq, s.header.stamp.sec, s.estimator) == (4, 104, 'joint5')
     assert s.theta == pytest.approx(8 * node.rig.count_angle)
@@ -83,6 +86,8 @@ def test_node_publishes_refuses_and_switches(graph):
     assert states[-1].theta - s.theta == pytest.approx(2 * node.rig.count_angle)
     assert math.isfinite(states[-1].theta_dot)
     assert len(joints) == 5
+    pub_cmd.publish(MotorCommand(seq=5, u=25.0))
+    assert spin_until(ex, lambda: node.u_seq == 5)
     # ~/reset
     cli = tester.create_client(Trigger, node.get_fully_qualified_name() + '/reset')
     assert spin_until(ex, cli.service_is_ready)

@@ -27,7 +27,7 @@ from std_srvs.srv import SetBool
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState
 from rwpend_msgs.srv import Disturb
-from rwpend_ros.common import (QOS_CONTROL, QOS_LATCHED, QOS_STATUS, ConfigError, declare_rig,
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, declare_rig,
                                diagnostic_status, run_node)
 from rwpend_sim.sim_core import SimCore
 
@@ -83,10 +83,10 @@ class SimNode(Node):
         self.stop = threading.Event()
         self.finished = False
 
-        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL)
-        self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL)
+        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
+        self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL) if self.lockstep else None
+        self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
         self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
@@ -119,8 +119,11 @@ class SimNode(Node):
             changed = self.core.estop != on
             self.core.estop = on
         if changed:
-            (self.get_logger().warn if on else self.get_logger().info)(
-                'E-STOP raised: motor held at zero' if on else 'e-stop cleared')
+            # one call site per severity: rclpy refuses a severity change at a call site
+            if on:
+                self.get_logger().warn('E-STOP raised: motor held at zero')
+            else:
+                self.get_logger().info('e-stop cleared')
             self.publish_diagnostics()
         return 'e-stop raised: motor at zero until cleared' if on else 'e-stop cleared'
 
@@ -141,7 +144,10 @@ class SimNode(Node):
             else:
                 ok, msg = False, f'unknown disturbance kind {req.kind} (TAP=0, TORQUE=1)'
         resp.success, resp.message = ok, msg
-        (self.get_logger().info if ok else self.get_logger().warn)(f'disturb: {msg}')
+        if ok:
+            self.get_logger().info(f'disturb: {msg}')
+        else:
+            self.get_logger().warn(f'disturb refused: {msg}')
         return resp
 
     # ------------------------------------------------------------ publishing
