@@ -16,7 +16,17 @@ from .reader import Bag, read_bag
 
 U_MAX = 10.0
 CATCH_WINDOW = 0.5   # |wrap(theta - pi)| below this counts as "up"
+SETTLE_S = 1.0       # s of uninterrupted balance before a sample counts as "settled"
 BALANCE_LAWS = ('catch', 'balance')
+
+
+def _unwrapped_lines(x, y):
+    """x, y with a NaN inserted where the wrapped angle x jumps by 2 pi (no line across the plot)."""
+    x = np.asarray(x, float)
+    y = np.asarray(y, float)[:len(x)]
+    x = x[:len(y)]
+    cut = np.where(np.abs(np.diff(x)) > np.pi)[0] + 1
+    return np.insert(x, cut, np.nan), np.insert(y, cut, np.nan)
 
 
 def wrap(a):
@@ -129,6 +139,14 @@ def analyze(bag: Bag | str, series: dict | None = None) -> dict:
             balanced[i_up:] = np.abs(err[i_up:]) < CATCH_WINDOW
     m['balanced_time_s'] = float(np.sum(balanced) * np.median(np.diff(t))) if len(t) > 1 else 0.0
     m['balance_rms_rad'] = float(np.sqrt(np.mean(err[balanced] ** 2))) if balanced.any() else None
+    # the same after the catch transients: samples balanced for >= SETTLE_S without interruption
+    settled = np.zeros(len(t), bool)
+    if balanced.any() and len(t) > 1:
+        idx = np.arange(len(t))
+        starts = np.where(balanced & ~np.r_[False, balanced[:-1]], idx, 0)
+        run = idx - np.maximum.accumulate(starts)
+        settled = balanced & (run * np.median(np.diff(t)) >= SETTLE_S)
+    m['balance_rms_settled_rad'] = float(np.sqrt(np.mean(err[settled] ** 2))) if settled.any() else None
 
     # control
     if 'command' in s:
@@ -183,6 +201,7 @@ def format_metrics(m: dict) -> str:
              f"time to catch:        {f(m.get('time_to_catch_s'), ' s')}",
              f"balanced time:        {f(m.get('balanced_time_s'), ' s')}",
              f"balance RMS theta-pi: {f(m.get('balance_rms_rad'), ' rad', '{:.5f}')}",
+             f"  after {SETTLE_S:g} s settled: {f(m.get('balance_rms_settled_rad'), ' rad', '{:.5f}')}",
              f"control RMS:          {f(m.get('control_rms'), ' units')}",
              f"saturation fraction:  {f(m.get('saturation_fraction'), '', '{:.4f}')}",
              'wheel rate range:     ' + ('n/a' if not m.get('wheel_rate_range_rad_s') else
@@ -250,13 +269,14 @@ def plot(bag: Bag | str, out_file: str, series: dict | None = None) -> None:
     for ax in axes:
         ax.grid(alpha=0.3)
     ph = fig.add_subplot(gs[0:3, 1])
-    ph.plot(wrap(st['theta'] - np.pi) + np.pi, st['theta_dot'], lw=0.5)
+    ph.plot(*_unwrapped_lines(wrap(st['theta'] - np.pi) + np.pi, st['theta_dot']), lw=0.5)
     ph.set_xlabel(r'$\theta$ [rad] (wrapped)')
     ph.set_ylabel(r'$\dot\theta$ [rad/s]')
     ph.set_title('phase portrait')
     ph.grid(alpha=0.3)
     en = fig.add_subplot(gs[3:6, 1])
-    en.plot(wrap(st['theta'] - np.pi) + np.pi, 1 - np.cos(st['theta']) if src == 'truth' else energy[:len(t)], lw=0.5)
+    en.plot(*_unwrapped_lines(wrap(st['theta'] - np.pi) + np.pi,
+                              1 - np.cos(st['theta']) if src == 'truth' else energy[:len(t)]), lw=0.5)
     en.set_xlabel(r'$\theta$ [rad] (wrapped)')
     en.set_ylabel('E' if src != 'truth' else r'$1-\cos\theta$')
     en.set_title('energy vs angle')
