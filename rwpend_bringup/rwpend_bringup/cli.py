@@ -3,7 +3,8 @@
 Commands (``./rwpend COMMAND --help`` for each):
 
   up        run the stack: plant (simulator or serial driver), estimator, controller [, recorder]
-  node      run one node (like ``ros2 run``): sim, estimator, controller, driver
+  node      run one node (like ``ros2 run``): sim, estimator, controller, driver; -p NAME:=VALUE
+  sim       the simulator alone (= ``node sim``), e.g. ``./rwpend sim -p lockstep:=true``
   demo      swing-up, catch, balance and a tap on the simulator; bag + plot + metrics
   param     get / set / list / dump / describe parameters of a running node (standard services)
   mode      set the controller's mode (off, wheel_velocity, wheel_angle, balance, swingup, auto)
@@ -59,6 +60,23 @@ def rig_file() -> Path:
 
 def stack_file() -> Path:
     return Path(__file__).resolve().parent / 'config' / 'stack.yaml'
+
+
+def apply_network_defaults(env=None) -> None:
+    """Network hygiene: ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE from the
+    ``/**/rwpend_network`` section of stack.yaml, unless already set in the environment
+    (discovery stays on this host by default).  Every node and tool started by ./rwpend inherits
+    them."""
+    import yaml
+    env = os.environ if env is None else env
+    try:
+        net = yaml.safe_load(stack_file().read_text())['/**/rwpend_network']['ros__parameters']
+    except (OSError, KeyError, TypeError, yaml.YAMLError):
+        net = {}
+    domain = net.get('domain_id', 0)
+    if isinstance(domain, int) and not isinstance(domain, bool) and 0 <= domain <= 232:
+        env.setdefault('ROS_DOMAIN_ID', str(domain))
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', str(net.get('discovery_range', 'LOCALHOST')))
 
 
 def parse_assignment(text: str) -> tuple[str, str, object]:
@@ -226,19 +244,103 @@ def run_stack(a, specs, files, on_started=None) -> int:
     return status
 
 
-def node_main(argv) -> int:
-    if not argv or argv[0] in ('-h', '--help') or argv[0] not in NODE_MODULES:
-        print('usage: rwpend node {' + ','.join(NODE_MODULES) + '} [--ros-args ...]\n'
-              'Runs one node with the rig YAML and the stack defaults loaded, in namespace '
-              f'{DEFAULT_NS} unless --ros-args -r __ns:=... is given.', file=sys.stderr)
-        return 0 if argv and argv[0] in ('-h', '--help') else 2
-    name, rest = argv[0], argv[1:]
-    ros = rest[rest.index('--ros-args') + 1:] if '--ros-args' in rest else []
-    ns = [] if any(x.startswith('__ns:=') for x in ros) else ['-r', f'__ns:={DEFAULT_NS}']
-    cmd = [sys.executable, '-u', '-m', NODE_MODULES[name], '--ros-args', *ns,
-           '--params-file', str(rig_file()), '--params-file', str(stack_file()), *ros]
+NODE_USAGE = """usage: rwpend node {NODES} [-p NAME:=VALUE ...] [--params FILE ...] [--ns NS] [--ros-args ...]
+       rwpend sim [-p NAME:=VALUE ...] [...]          (= rwpend node sim)
+
+Runs one node (like `ros2 run`) with the rig YAML and the stack defaults loaded, in namespace
+{NS} unless --ns (or --ros-args -r __ns:=...) is given. -p NAME:=VALUE overrides a
+parameter (rig data too: -p rig.g:=9.91); --params adds a ROS 2 params file (later wins).
+Examples:
+  ./rwpend sim -p lockstep:=true -p initial.theta:=3.1416     # the simulator alone
+  ./rwpend node estimator --ns /offline -p estimator:=observer3"""
+
+
+def node_main(argv, name: str | None = None) -> int:
+    """One node process. -p overrides are written to a last params file: rclpy ranks a file's
+    `/**/node` section above a command-line -p, so a plain -p would lose to stack.yaml."""
+    import tempfile
+
+    import yaml
+    prog = 'rwpend sim' if name == 'sim' else 'rwpend node'
+    usage = NODE_USAGE.format(NODES='{' + ','.join(NODE_MODULES) + '}', NS=DEFAULT_NS)
+    argv = list(argv)
+    if name is None:
+        if not argv or argv[0] in ('-h', '--help'):
+            print(usage)
+            return 0 if argv else 2
+        if argv[0] not in NODE_MODULES:
+            return fail(prog, f'unknown node {argv[0]!r} (one of {", ".join(NODE_MODULES)})')
+        name, argv = argv[0], argv[1:]
+    ros = argv[argv.index('--ros-args') + 1:] if '--ros-args' in argv else []
+    ours = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
+    if any(x in ('-h', '--help') for x in ours):
+        print(usage)
+        return 0
+    overrides: dict = {}
+    files: list[str] = []
+    ns = None
+    rest_ros: list[str] = []
+    i = 0
+    items = [('ours', x) for x in ours] + [('ros', x) for x in ros]
+    while i < len(items):
+        kind, x = items[i]
+        nxt = items[i + 1][1] if i + 1 < len(items) else None
+        if x in ('-p', '--param'):
+            if nxt is None or ':=' not in nxt:
+                return fail(prog, f'{x} expects NAME:=VALUE, got {nxt!r}')
+            key, val = nxt.split(':=', 1)
+            if not key:
+                return fail(prog, f'{x} expects NAME:=VALUE, got {nxt!r}')
+            try:
+                overrides[key] = yaml.safe_load(val) if val != '' else ''
+            except yaml.YAMLError:
+                overrides[key] = val
+            i += 2
+        elif kind == 'ours' and x == '--params':
+            if nxt is None or not Path(nxt).is_file():
+                return fail(prog, f'--params: no such file {nxt!r}')
+            files.append(str(Path(nxt).resolve()))
+            i += 2
+        elif kind == 'ours' and x == '--ns':
+            if nxt is None:
+                return fail(prog, '--ns expects a namespace')
+            try:
+                ns = namespace_arg(nxt)
+            except (argparse.ArgumentTypeError, ValueError) as exc:
+                return fail(prog, str(exc))
+            i += 2
+        elif kind == 'ours':
+            return fail(prog, f'unknown argument {x!r} (ROS arguments go after --ros-args)')
+        else:
+            rest_ros.append(x)
+            i += 1
+    for f in files:
+        from rwpend_model.rig import read_params_file
+        try:
+            read_params_file(f)
+        except ValueError as exc:
+            return fail(prog, f'{f}: {exc}')
+    if ns is None and not any(x.startswith('__ns:=') for x in rest_ros):
+        ns = DEFAULT_NS
+    cmd = [sys.executable, '-u', '-m', NODE_MODULES[name], '--ros-args']
+    if ns is not None:
+        cmd += ['-r', f'__ns:={ns}']
+    cmd += ['--params-file', str(rig_file()), '--params-file', str(stack_file())]
+    for f in files:
+        cmd += ['--params-file', f]
+    if overrides:
+        fd, path = tempfile.mkstemp(prefix=f'rwpend_{name}_', suffix='.yaml')
+        with os.fdopen(fd, 'w') as fh:
+            yaml.safe_dump({f'/**/{name}': {'ros__parameters': overrides}}, fh)
+        cmd += ['--params-file', path]
+    cmd += rest_ros
+    sys.stdout.flush()
     os.execv(sys.executable, cmd)
     return 0  # pragma: no cover
+
+
+def sim_main(argv) -> int:
+    return node_main(argv, name='sim')
 
 
 # ------------------------------------------------------------------ demo
@@ -449,7 +551,7 @@ def bench_main(argv) -> int:
 
 
 COMMANDS = {
-    'up': up_main, 'node': node_main, 'demo': demo_main, 'param': param_main, 'mode': mode_main,
+    'up': up_main, 'node': node_main, 'sim': sim_main, 'demo': demo_main, 'param': param_main, 'mode': mode_main,
     'tap': tap_main, 'estop': estop_main, 'gains': gains_main, 'record': record_main,
     'play': play_main, 'bag': bag_main, 'analyze': analyze_main, 'emulate': emulate_main,
     'bench': bench_main,
@@ -462,6 +564,7 @@ def main(argv=None) -> int:
         print(__doc__.strip().replace('``', '`'))
         return 0 if argv else 2
     cmd = argv[0]
+    apply_network_defaults()
     if cmd not in COMMANDS:
         print(f'rwpend: unknown command {cmd!r}; `./rwpend --help` lists them', file=sys.stderr)
         return 2
