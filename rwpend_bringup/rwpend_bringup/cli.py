@@ -129,6 +129,10 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='sim: scripted tap at simulated time T s, theta_dot += DV rad/s')
     p.add_argument('--h', type=float, default=None, help='sample period (s), all nodes (rig.sample_period)')
     p.add_argument('--no-controller', action='store_true', help='do not start the controller')
+    p.add_argument('--rt-priority', type=int, default=0, metavar='N',
+                   help='SCHED_FIFO priority N (1-99) for the loop processes (plant, estimator, '
+                   'controller), N-10 for the recorder; falls back to nice -10 where real-time '
+                   'scheduling is not permitted (default 0: ordinary scheduling); see PERFORMANCE.md')
     p.add_argument('--composed', action='store_true',
                    help='plant (simulator), estimator and controller as nodes of ONE process on one '
                    'executor (the recorder stays a process of its own); see PERFORMANCE.md')
@@ -194,6 +198,11 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     if not a.no_controller:
         specs.append(NodeSpec('controller', NODE_MODULES['controller'],
                               {**rig, **sim_time, **params['controller']}, stop_rank=1))
+    if plant == 'sim' and a.lockstep:
+        # sample 0 waits until the controller (and the recorder) listen to state: otherwise
+        # state 0 may be published before the controller matched it, and the run would start
+        # with u = 0 for a few samples -- not deterministic
+        plant_spec.params['start.state_subscribers'] = int(not a.no_controller) + int(bool(a.record))
     if a.record:
         if plant == 'sim':   # the simulator holds sample 0 until the recorder listens
             plant_spec.params.update({'start.encoders_subscribers': 2, 'start.true_state_subscribers': 1})
@@ -212,6 +221,12 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         specs = [NodeSpec('stack', 'rwpend_bringup.composed', args=[s.name for s in nodes],
                           node_params={s.name: s.params for s in nodes}, stop_rank=3),
                  *[s for s in specs if s not in nodes]]
+    prio = getattr(a, 'rt_priority', 0) or 0
+    if not 0 <= prio <= 99:
+        raise ValueError(f'--rt-priority must be in 0..99, got {prio}')
+    if prio:
+        for s in specs:
+            s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - 10) if s.name == 'recorder' else prio)
     files = [str(rig_file()), str(stack_file()), *map(str, a.params)]
     return specs, files
 

@@ -37,6 +37,9 @@ PARAMS = {
     'start.delay': (0.5, 'wall seconds to wait after the loop is connected, before sample 0'),
     'start.encoders_subscribers': (1, 'subscribers of encoders to wait for before sample 0 (2 with a recorder)'),
     'start.true_state_subscribers': (0, 'subscribers of sim/true_state to wait for before sample 0'),
+    'start.state_subscribers': (0, 'lockstep: subscribers of state (the controller) to wait for before sample 0'),
+    'start.first_command_timeout': (10.0, 'lockstep: wall seconds sample 0 waits for its command '
+                                    '(start-up under load; later samples wait lockstep_timeout)'),
     'command_timeout_samples': (3, 'samples without a fresh command before u = 0'),
     'initial.theta': (0.0, 'initial pendulum angle (rad, 0 hanging, pi upright)'),
     'initial.theta_dot': (0.0, 'initial pendulum angular velocity (rad/s)'),
@@ -62,8 +65,10 @@ class SimNode(Node):
         for name, (default, descr) in PARAMS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True))
         p = {name: self.get_parameter(name).value for name in PARAMS}
-        if p['lockstep_timeout'] <= 0 or p['diagnostics_period'] <= 0 or p['duration'] < 0:
-            raise ConfigError('lockstep_timeout and diagnostics_period must be > 0, duration >= 0')
+        if (p['lockstep_timeout'] <= 0 or p['diagnostics_period'] <= 0 or p['duration'] < 0
+                or p['start.first_command_timeout'] <= 0):
+            raise ConfigError('lockstep_timeout, start.first_command_timeout and diagnostics_period '
+                              'must be > 0, duration >= 0')
         try:
             self.core = SimCore(self.rig, command_timeout_samples=p['command_timeout_samples'],
                                 theta=p['initial.theta'], theta_dot=p['initial.theta_dot'],
@@ -100,8 +105,7 @@ class SimNode(Node):
         self.clock_msg = Clock()
         self.wall_start = time.monotonic()
         self.overruns = 0
-        self.thread = threading.Thread(target=self.loop_lockstep if self.lockstep else self.loop_realtime,
-                                       name='sim-loop', daemon=True)
+        self.thread = threading.Thread(target=self._run_loop, name='sim-loop', daemon=True)
         self.thread.start()
         mode = 'lockstep' if self.lockstep else 'real time'
         self.get_logger().info(f'simulated rig: h = {self.h * 1e3:g} ms, {mode}, '
@@ -182,11 +186,23 @@ class SimNode(Node):
         while not self.stop.is_set():
             if (self.pub_enc.get_subscription_count() >= n_enc
                     and self.pub_true.get_subscription_count() >= n_true
-                    and (not need_command or self.count_publishers(self.resolve_topic_name('command')) > 0)):
+                    and (not need_command or (
+                        self.count_publishers(self.resolve_topic_name('command')) > 0
+                        and self.count_subscribers(self.resolve_topic_name('state'))
+                        >= self.p['start.state_subscribers']))):
                 break
             time.sleep(0.02)
         time.sleep(self.p['start.delay'])
         self.wall_start = time.monotonic()
+
+    def _run_loop(self) -> None:
+        """The loop thread.  SIGINT shuts the context down under it (rclpy's handler runs before
+        close()): a publish failing then is the normal end, not an error."""
+        try:
+            (self.loop_lockstep if self.lockstep else self.loop_realtime)()
+        except Exception:  # noqa: BLE001 - re-raised unless the context is gone
+            if self.context.ok() and not self.stop.is_set():
+                raise
 
     def loop_realtime(self) -> None:
         self.wait_for_loop(need_command=False)
@@ -205,7 +221,7 @@ class SimNode(Node):
             elif delay < -period_ns:
                 self.overruns += 1
             with self.lock:
-                self.core.advance()
+                self._advance()
         self.finish()
 
     def loop_lockstep(self) -> None:
@@ -220,12 +236,24 @@ class SimNode(Node):
             self.pub_clock.publish(self.clock_msg)
             with self.lock:
                 self.publish_sample(stamp)
-                answered = self.lock.wait_for(lambda: self.core.u_seq >= k or self.stop.is_set(), timeout)
+                answered = self.lock.wait_for(lambda: self.core.u_seq >= k or self.stop.is_set(),
+                                              timeout if k else self.p['start.first_command_timeout'])
+                if not answered and k == 0:
+                    self.get_logger().warn('lockstep: no command for sample 0 within '
+                                           f"{self.p['start.first_command_timeout']:g} s; running with u = 0")
                 if not answered:
                     self.core.counters.late_commands += 1
                     self.core.last_command_k = None   # no command for this sample: u = 0
-                self.core.advance()
+                self._advance()
         self.finish()
+
+    def _advance(self) -> None:
+        """One sample of the plant; /diagnostics at once when the command timeout starts, so the
+        reason for u = 0 is reported when it happens (not up to a diagnostics period later)."""
+        was = self.core.timed_out
+        self.core.advance()
+        if self.core.timed_out and not was:
+            self.publish_diagnostics()
 
     def finish(self) -> None:
         if self.done() and not self.finished:
