@@ -158,7 +158,9 @@ class Plant:
         decay = math.exp(-dt / te) if te > 0 else 0.0
         half_decay = math.exp(-0.5 * dt / te) if te > 0 else 0.0
         th, thd, thr, thrd = self._x
-        tau0 = self._tau
+        # with the lag the torque is continuous; without it the ZOH torque jumps to u at t_k
+        # (starting from the previous sample's torque would lose 1/6 of the first sub-step)
+        tau0 = self._tau if te > 0 else u
         stuck = self._stuck
         fb = self._fbreak
         for _ in range(self._n):
