@@ -62,10 +62,8 @@ def _record(argv) -> int:
     if not out.parent.exists():
         return _usage_error(p.prog, f'{out.parent} does not exist')
     topics = [_abs_topic(t, a.namespace) for t in a.topics]
-    from rwpend_ros.common import run_node
-
-    from .recorder_node import Recorder
-    return run_node(lambda: Recorder(str(out), topics, a.all), args=[])
+    from .recorder_node import run_recorder
+    return run_recorder(str(out), topics, a.all)
 
 
 # ------------------------------------------------------------------ info

@@ -18,6 +18,8 @@ from .writer import INFINITE_TIME, ThreadedBagWriter
 
 DEPTH = 1000
 POLL_S = 0.5
+DRAIN_IDLE_S = 0.25    # on stop: keep recording until nothing arrived for this long ...
+DRAIN_LIMIT_S = 2.0    # ... or this long at most (a second Ctrl-C ends it at once)
 
 
 def _dur(d) -> dict:
@@ -47,6 +49,7 @@ class Recorder(Node):
         self.subs: dict[str, object] = {}
         self.skipped: dict[str, str] = {}
         self._closed = False
+        self._received = [0]
         self.create_timer(POLL_S, self.discover)
         self.get_logger().info(f'recording to {out_dir} '
                                f'({"all topics" if record_all else ", ".join(sorted(self.wanted))})')
@@ -78,11 +81,36 @@ class Recorder(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
                              else DurabilityPolicy.VOLATILE)
             self.writer.add_topic(name, type_name, [qos_dict(q) for q in offered])
-            put = self.writer.put
             self.subs[name] = self.create_subscription(
-                cls, name, lambda data, _n=name: put(_n, data, time.time_ns()), qos, raw=True)
+                cls, name, self._receiver(name), qos, raw=True)
             self.get_logger().info(f'recording {name} [{type_name}] '
                                    f'{"reliable" if reliable else "best effort"}')
+
+    def _receiver(self, name: str):
+        put = self.writer.put
+        counter = self._received
+
+        def receive(data, _n=name, _put=put, _now=time.time_ns, _count=counter):
+            _put(_n, data, _now())
+            _count[0] += 1
+        return receive
+
+    def drain(self, executor, idle: float = DRAIN_IDLE_S, limit: float = DRAIN_LIMIT_S,
+              abort=lambda: False) -> int:
+        """Keep taking messages until none arrived for ``idle`` s (at most ``limit`` s); returns how
+        many were taken. Called when asked to stop: what the stack sent last (its final samples,
+        still in the DDS queues of a recorder that runs behind) goes into the bag too."""
+        n0 = last = self._received[0]
+        t_last = end = time.monotonic()
+        end += limit
+        while time.monotonic() < end and not abort():
+            executor.spin_once(timeout_sec=0.02)
+            n = self._received[0]
+            if n != last:
+                last, t_last = n, time.monotonic()
+            elif time.monotonic() - t_last >= idle:
+                break
+        return last - n0
 
     def close(self) -> dict:
         if self._closed:
@@ -107,3 +135,45 @@ def print_report(report: dict, file=sys.stdout) -> None:
     if report.get('writer_error'):
         print(f"  WRITER ERROR: {report['writer_error']}", file=file)
     file.flush()
+
+
+def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool) -> int:
+    """The ``record`` process: record until SIGINT/SIGTERM, then drain (:meth:`Recorder.drain`)
+    and close the bag. rclpy's own signal handlers are off, so the context stays usable while
+    draining. Priority from the environment (``rwpend_ros.common.apply_scheduling``)."""
+    import signal
+    import threading
+
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    from rwpend_ros.common import apply_scheduling, freeze_gc, make_executor
+    apply_scheduling()
+    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    signals = [0]
+
+    def on_signal(*_):
+        signals[0] += 1
+        stop.set()
+    old = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    node = None
+    try:
+        node = Recorder(out_dir, topics, record_all)
+        executor = make_executor()
+        executor.add_node(node)
+        freeze_gc()
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+        if rclpy.ok():
+            node.drain(executor, abort=lambda: signals[0] > 1)
+    except KeyboardInterrupt:  # pragma: no cover - handlers are ours
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for sig, h in old.items():
+            signal.signal(sig, h)
+    return 0

@@ -42,6 +42,12 @@ class NodeSpec:
     ros_args: bool = True                      # pass --ros-args (False for plain programs)
     stop_rank: int = 1                         # lower stops first
     required: bool = True                      # the stack stops when this one exits
+    #: a process holding several nodes (``--composed``): {node name: overrides}; each node gets
+    #: its own ``/**/<node>`` section in the overrides file and no ``__node`` remap is given
+    #: (it would rename every node of the process)
+    node_params: dict | None = None
+    #: environment of this process on top of the launcher's (a value None removes the variable)
+    env: dict = field(default_factory=dict)
 
 
 def format_param_value(value) -> str:
@@ -70,14 +76,18 @@ def overrides_yaml(spec: NodeSpec) -> str:
     against stack.yaml (measured: ``-p mode:=auto`` left the controller ``off``).
     """
     import yaml
-    nested: dict = {}
-    for name, value in spec.params.items():
-        d = nested
-        parts = name.split('.')
-        for part in parts[:-1]:
-            d = d.setdefault(part, {})
-        d[parts[-1]] = list(value) if isinstance(value, tuple) else value
-    return yaml.safe_dump({f'/**/{spec.name}': {'ros__parameters': nested}}, sort_keys=False)
+    sections = spec.node_params if spec.node_params is not None else {spec.name: spec.params}
+    doc = {}
+    for node, params in sections.items():
+        nested: dict = {}
+        for name, value in params.items():
+            d = nested
+            parts = name.split('.')
+            for part in parts[:-1]:
+                d = d.setdefault(part, {})
+            d[parts[-1]] = list(value) if isinstance(value, tuple) else value
+        doc[f'/**/{node}'] = {'ros__parameters': nested}
+    return yaml.safe_dump(doc, sort_keys=False)
 
 
 def node_command(spec: NodeSpec, namespace: str, params_files: Sequence[str | Path],
@@ -86,11 +96,15 @@ def node_command(spec: NodeSpec, namespace: str, params_files: Sequence[str | Pa
     cmd = [python, '-u', '-m', spec.module, *map(str, spec.args)]
     if not spec.ros_args:
         return cmd
-    cmd += ['--ros-args', '-r', f'__ns:={namespace}', '-r', f'__node:={spec.name}']
+    cmd += ['--ros-args', '-r', f'__ns:={namespace}']
+    if spec.node_params is None:
+        cmd += ['-r', f'__node:={spec.name}']
     for f in params_files:
         cmd += ['--params-file', str(f)]
     if overrides_file is not None:
         cmd += ['--params-file', str(overrides_file)]
+    elif spec.node_params is not None:
+        raise ValueError(f'{spec.name}: a multi-node process needs an overrides file')
     elif spec.params:
         for name, value in spec.params.items():
             cmd += ['-p', f'{name}:={format_param_value(value)}']
@@ -138,11 +152,16 @@ class Launcher:
         self.tmpdir = tempfile.TemporaryDirectory(prefix='rwpend_launch_')
         for spec in self.specs:
             overrides = None
-            if spec.ros_args and spec.params:
+            if spec.ros_args and (spec.params or spec.node_params is not None):
                 overrides = Path(self.tmpdir.name) / f'{spec.name}.yaml'
                 overrides.write_text(overrides_yaml(spec))
             cmd = node_command(spec, self.namespace, self.params_files, overrides_file=overrides)
-            p = subprocess.Popen(cmd, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            env = self.env
+            if spec.env:
+                env = {**env, **{k: str(v) for k, v in spec.env.items() if v is not None}}
+                for k in [k for k, v in spec.env.items() if v is None]:
+                    env.pop(k, None)
+            p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                  stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent)
             self.procs[spec.name] = p
             t = threading.Thread(target=self._pump, args=(spec.name, p.stdout), daemon=True)

@@ -18,6 +18,18 @@ back to the caller and the old values stay -- and applied in the post-set callba
   the design parameters ``<group>.design.*`` (e.g. ``balance.design.omega0: 1.5wp``); changing
   a design parameter later redesigns its group and updates the gain parameters.
 * ``status_every`` (samples, >= 1).
+* safety (:mod:`rwpend_control.safety`): ``state_timeout_samples`` (no new state for this many
+  h, + h/2, on the node's clock -- sim time in lockstep -> one zero command answering seq + 1, fault
+  "stale state" in controller/status and /diagnostics, until the next state),
+  ``wheel_speed_limit`` (rad/s of the motor, below the back-EMF cut-off (2.13)) with
+  ``wheel_speed_action`` (brake | off), ``max_saturation_time`` (s) with ``saturation_action``
+  (off | swingup | auto).
+
+Faults never stop the node: a refused state is counted and answered with u = 0 (non-finite or
+implausible) or not at all (out of order); a parameter request that raises is refused with the
+reason; an error inside a control law gives u = 0 and a report.  controller/status is published
+at once on every switch and every change of fault, /diagnostics at once when the state goes
+stale.
 
 All algorithms live in :mod:`rwpend_control.supervisor`, :mod:`.laws`, :mod:`.design` (no rclpy).
 """
@@ -28,6 +40,7 @@ import math
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -35,9 +48,13 @@ from rwpend_msgs.msg import ControllerStatus, MotorCommand, StateEstimate
 from rwpend_msgs.srv import SetMode
 from rwpend_ros.common import QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status, run_node
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
-                                       Controller, ControllerConfig, design_group, gains_from_design)
+                                       Controller, ControllerConfig, Status, design_group, gains_from_design)
 
 DESIGNED_PARAMS = {p for names in DESIGN_GROUPS.values() for p in names}
+#: Period of the stale-state check (s, steady clock): the controller notices a silent state
+#: stream within state_timeout_samples h + this.  The plant's own command timeout zeros the
+#: motor within its timeout regardless.
+WATCHDOG_PERIOD = 0.005
 
 
 def _time_msg(t: float) -> Time:
@@ -70,7 +87,7 @@ class ControllerNode(Node):
             if any(values[n] is None for n in names):
                 try:
                     designed = gains_from_design(self.rig, group, self._spec(group, designs))
-                except (ValueError, TypeError, KeyError) as exc:
+                except (ValueError, TypeError, KeyError, ArithmeticError) as exc:
                     raise ConfigError(f'{group} design: {exc}') from exc
                 for n in names:
                     if values[n] is None:
@@ -91,6 +108,11 @@ class ControllerNode(Node):
             raise ConfigError(msg)
 
         self.samples = 0
+        self.unanswered = 0          # states refused without a command (out of order)
+        self.law_errors = 0          # exceptions inside the control laws (u = 0)
+        self.param_errors = 0        # exceptions while validating parameters (refused)
+        self.stale_fault = ''        # the fault while the state is stale
+        self._last_fault_kind = ''
         self._since_status = 0
         self._syncing = False
         self._pending_params: list[Parameter] = []
@@ -103,6 +125,9 @@ class ControllerNode(Node):
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
         self.create_timer(1.0, self.publish_diagnostics)
         self.create_timer(0.05, self._do_sync)
+        # steady clock: fires while sim time stands still too (a stale state in lockstep shows
+        # as sim time moving on without states; judged on the node's clock in _check_stale)
+        self.create_timer(WATCHDOG_PERIOD, self._check_stale, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.cmd_msg = MotorCommand()
         self.last_status = None
         c = self.ctrl.config
@@ -133,7 +158,7 @@ class ControllerNode(Node):
         for group in sorted(groups):
             try:
                 designed = gains_from_design(self.rig, group, self._spec(group, designs))
-            except (ValueError, TypeError, KeyError) as exc:
+            except (ValueError, TypeError, KeyError, ArithmeticError) as exc:
                 errors.append(f'{group} design: {exc}')
                 continue
             for n, v in designed.items():
@@ -141,9 +166,20 @@ class ControllerNode(Node):
         return values, errors
 
     def on_set_parameters(self, params) -> SetParametersResult:
-        """Validate only (the node still holds the old values here)."""
+        """Validate only (the node still holds the old values here).  Never raises: whatever a
+        request holds, the answer is a reason."""
         if self._syncing:
             return SetParametersResult(successful=True)
+        try:
+            return self._validate(params)
+        except Exception as exc:  # noqa: BLE001 - a malformed request must not kill the node
+            self.param_errors += 1
+            reason = f'refused: {type(exc).__name__}: {exc}'
+            self.get_logger().warn(f'parameter request {[(p.name, p.value) for p in params]!r:.300}: {reason}',
+                                   throttle_duration_sec=1.0)
+            return SetParametersResult(successful=False, reason=reason)
+
+    def _validate(self, params) -> SetParametersResult:
         reasons = []
         for p in params:
             if p.name.startswith('rig.'):
@@ -217,12 +253,29 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------ callbacks
     def on_state(self, msg: StateEstimate) -> None:
+        now_t = self.get_clock().now()
+        now = now_t.nanoseconds * 1e-9
         stamp = msg.header.stamp
         if stamp.sec == 0 and stamp.nanosec == 0:
-            stamp = self.get_clock().now().to_msg()
+            stamp = now_t.to_msg()
         t = stamp.sec + stamp.nanosec * 1e-9
-        u, st = self.ctrl.update(t, msg.seq, msg.theta, msg.theta_dot, msg.wheel_angle, msg.wheel_rate,
-                                 msg.friction)
+        try:
+            u, st = self.ctrl.update(t, msg.seq, msg.theta, msg.theta_dot, msg.wheel_angle, msg.wheel_rate,
+                                     msg.friction, now=now)
+        except Exception as exc:  # noqa: BLE001 - a fault in a law: zero torque, reported
+            self.law_errors += 1
+            u, st = 0.0, Status(t=t, seq=msg.seq, mode=self.ctrl.mode, law=self.ctrl.law,
+                                last_switch=self.ctrl.last_switch, switch_count=self.ctrl.switch_count,
+                                reason=self.ctrl.reason, fault=f'internal error: {type(exc).__name__}: {exc}')
+        if not st.answer:
+            self.unanswered += 1
+            self.get_logger().warn(st.fault, throttle_duration_sec=1.0)
+            return
+        if not math.isfinite(u) or abs(u) > self.ctrl.u_max:   # pragma: no cover - saturated above
+            u = 0.0
+        if st.note:
+            self.stale_fault = ''
+            self.get_logger().info(st.note, throttle_duration_sec=1.0)
         c = self.cmd_msg
         c.header.stamp = stamp
         c.header.frame_id = msg.header.frame_id
@@ -232,16 +285,46 @@ class ControllerNode(Node):
         self.samples += 1
         self._since_status += 1
         self.last_status = st
-        if st.event is not None or self._since_status >= self.status_every:
+        fault_kind = st.fault.split(':', 1)[0]
+        if st.event is not None or st.note or fault_kind != self._last_fault_kind \
+                or self._since_status >= self.status_every:
             self._since_status = 0
+            self._last_fault_kind = fault_kind
             self.publish_status(st, stamp)
+            if st.note:
+                self.publish_diagnostics()
         if st.event is not None:
             ev = st.event
-            self.get_logger().info(f'switch {ev.from_} -> {ev.to}: {ev.reason}')
+            # one call site per severity: rclpy refuses a severity change at a call site
+            if ev.reason.startswith(('overspeed', 'saturated', 'fell')):
+                self.get_logger().warn(f'safety switch {ev.from_} -> {ev.to}: {ev.reason}')
+            else:
+                self.get_logger().info(f'switch {ev.from_} -> {ev.to}: {ev.reason}')
             if self.get_parameter('mode').value != self.ctrl.mode:
                 self._schedule_sync([Parameter('mode', value=self.ctrl.mode)])
         if st.fault:
             self.get_logger().warn(st.fault, throttle_duration_sec=1.0)
+
+    def _check_stale(self) -> None:
+        """Timer: no new state for state_timeout_samples h on the node's clock -> one zero
+        command answering the next sample, the fault in controller/status and /diagnostics."""
+        now_t = self.get_clock().now()
+        st = self.ctrl.check_stale(now_t.nanoseconds * 1e-9)
+        if st is None:
+            return
+        stamp = now_t.to_msg()
+        c = self.cmd_msg
+        c.header.stamp = stamp
+        c.seq = st.seq
+        c.u = 0.0
+        self.pub_cmd.publish(c)
+        self.stale_fault = st.fault
+        self.last_status = st
+        self._last_fault_kind = st.fault.split(':', 1)[0]
+        self._since_status = 0
+        self.publish_status(st, stamp)
+        self.publish_diagnostics()
+        self.get_logger().warn(st.fault, throttle_duration_sec=1.0)
 
     def publish_status(self, st, stamp) -> None:
         m = ControllerStatus()
@@ -267,14 +350,22 @@ class ControllerNode(Node):
 
     def publish_diagnostics(self) -> None:
         st = self.last_status
+        ctrl = self.ctrl
+        wd = ctrl.watchdog
         if st is None:
             level, message = DiagnosticStatus.STALE, 'no state sample yet'
+        elif ctrl.stale:
+            level, message = DiagnosticStatus.ERROR, self.stale_fault or 'stale state: u = 0'
         elif st.fault:
             level, message = DiagnosticStatus.ERROR, st.fault
-        elif self.ctrl.bad_state_count:
-            level, message = DiagnosticStatus.WARN, f'{self.ctrl.bad_state_count} bad state samples refused'
+        elif ctrl.law == 'brake' or ctrl.reason.startswith(('overspeed', 'saturated', 'fell')):
+            level, message = DiagnosticStatus.WARN, f'{ctrl.mode}/{ctrl.law}: {ctrl.reason}'
+        elif ctrl.bad_state_count or wd.out_of_order or wd.episodes:
+            level, message = DiagnosticStatus.WARN, (
+                f'{ctrl.mode}/{ctrl.law}; refused {ctrl.bad_state_count} bad and {wd.out_of_order} '
+                f'out-of-order states; {wd.episodes} stale episodes')
         else:
-            level, message = DiagnosticStatus.OK, f'{self.ctrl.mode}/{self.ctrl.law}'
+            level, message = DiagnosticStatus.OK, f'{ctrl.mode}/{ctrl.law}'
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [diagnostic_status(
@@ -282,6 +373,11 @@ class ControllerNode(Node):
                 'mode': self.ctrl.mode, 'law': self.ctrl.law, 'samples': self.samples,
                 'switch_count': self.ctrl.switch_count, 'reason': self.ctrl.reason,
                 'bad_states': self.ctrl.bad_state_count,
+                'out_of_order_states': wd.out_of_order, 'stale': ctrl.stale,
+                'stale_episodes': wd.episodes, 'state_gaps': wd.gaps, 'state_restarts': wd.restarts,
+                'last_state_seq': wd.last_seq, 'overspeed_trips': ctrl.overspeed_trips,
+                'saturation_trips': ctrl.saturation_trips, 'fall_trips': ctrl.fall_trips,
+                'law_errors': self.law_errors, 'param_errors': self.param_errors,
                 'friction_compensation': self.ctrl.config.friction_compensation,
             })]
         self.pub_diag.publish(arr)

@@ -22,6 +22,22 @@ The default theta_0 = 0.8 rad gives 0.3 rad of hysteresis; a falling pendulum re
 0.1 s after leaving theta_s, before the swing-up has lost anything.
 
 Every change of mode or law is a :class:`SwitchEvent` (t, from, to, reason).
+
+Safety (:mod:`rwpend_control.safety`; every transition is a SwitchEvent or a ``fault``, so it
+shows in ControllerStatus and /diagnostics):
+
+* stale state: no new state for ``state_timeout_samples`` h on the controller's clock -> u = 0
+  once (answering seq + 1) and ``fault`` "stale state: ..." (:meth:`Controller.check_stale`,
+  called by the node's timer); the first fresh state clears it and the mode carries on.
+  States with a seq that does not increase are refused (not answered, counted).
+* bad state (non-finite or implausible fields): refused, counted, u = 0 for that sample (it
+  does not count as a fresh state for the watchdog).
+* wheel faster than ``wheel_speed_limit`` (motor speed, below the cut-off of (2.13)) in any
+  mode but ``off`` -> mode ``off``, law ``brake`` (or ``off``), reason "overspeed: ...".
+* ``balance`` saturated for longer than ``max_saturation_time`` -> ``saturation_action``
+  (off, swingup or auto), reason "saturated: ...".
+* ``balance`` with the pendulum beyond theta_0 (out of the region where it can be caught)
+  -> ``off``, reason "fell: ..." (``auto`` swings up again instead).
 """
 from __future__ import annotations
 
@@ -34,14 +50,17 @@ from . import design
 from .design import Gains
 from .laws import (FRICTION_MODES, Balance, EnergySwingUp, FrictionCompensation, WheelAnglePD,
                    WheelVelocityPI, upright_deviation)
+from .safety import (BRAKE_DONE_SPEED, SATURATION_ACTIONS, WHEEL_SPEED_ACTIONS, StateWatchdog, brake,
+                     motor_speed)
 
 MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto')
-LAWS = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'catch')
+LAWS = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'catch', 'brake')
 
 #: Limits of a sane state estimate; beyond them the sample is refused (u = 0, fault).
 MAX_THETA_DOT = 200.0       # rad/s (a fall from upright reaches 2 omega_p = 18 rad/s)
 MAX_ANGLE = 1e7             # rad, multi-turn angles
 MAX_FRICTION = 100.0        # control units
+MAX_SEQ = 2**64 - 1         # seq is a uint64
 
 
 @dataclass(frozen=True)
@@ -71,6 +90,8 @@ class Status:
     reason: str = ''
     fault: str = ''
     event: SwitchEvent | None = None   # set on the sample on which a switch happened
+    answer: bool = True    # False: the state was refused (out of order), publish no command
+    note: str = ''         # the state stream recovered / restarted on this sample
 
 
 @dataclass(frozen=True)
@@ -101,6 +122,12 @@ class ControllerConfig:
     friction_compensation: str = 'off'
     friction_deadband: float = 1.0
     allow_wheel_drift: bool = False
+    # safety (rwpend_control.safety)
+    state_timeout_samples: int = 3
+    wheel_speed_limit: float = 750.0
+    wheel_speed_action: str = 'brake'
+    max_saturation_time: float = 0.5
+    saturation_action: str = 'off'
 
     @classmethod
     def designed(cls, rig, **overrides: Any) -> 'ControllerConfig':
@@ -143,10 +170,17 @@ PARAM_FIELDS: dict[str, str] = {
     'theta_s': 'theta_s', 'theta_0': 'theta_0', 'catch_region': 'catch_region',
     'friction_compensation': 'friction_compensation', 'friction_deadband': 'friction_deadband',
     'allow_wheel_drift': 'allow_wheel_drift',
+    'state_timeout_samples': 'state_timeout_samples', 'wheel_speed_limit': 'wheel_speed_limit',
+    'wheel_speed_action': 'wheel_speed_action', 'max_saturation_time': 'max_saturation_time',
+    'saturation_action': 'saturation_action',
 }
 FIELD_PARAMS = {v: k for k, v in PARAM_FIELDS.items()}
 _BOOL_FIELDS = {'catch_region', 'allow_wheel_drift'}
-_STR_FIELDS = {'friction_compensation'}
+#: String fields and their allowed values.
+_CHOICES = {'friction_compensation': FRICTION_MODES, 'wheel_speed_action': WHEEL_SPEED_ACTIONS,
+            'saturation_action': SATURATION_ACTIONS}
+_STR_FIELDS = set(_CHOICES)
+_INT_FIELDS = {'state_timeout_samples'}
 
 
 def _num(name: str, v: Any) -> float:
@@ -237,8 +271,11 @@ def validate_config(cfg: ControllerConfig, rig) -> list[str]:
             if not isinstance(v, bool):
                 errors.append(f'{p[f.name]} must be a bool, got {v!r}')
         elif f.name in _STR_FIELDS:
-            if v not in FRICTION_MODES:
-                errors.append(f'{p[f.name]} must be one of {", ".join(FRICTION_MODES)}, got {v!r}')
+            if not isinstance(v, str) or v not in _CHOICES[f.name]:
+                errors.append(f'{p[f.name]} must be one of {", ".join(_CHOICES[f.name])}, got {v!r}')
+        elif f.name in _INT_FIELDS:
+            if isinstance(v, bool) or not isinstance(v, int):
+                errors.append(f'{p[f.name]} must be an integer, got {v!r}')
         else:
             try:
                 _num(p[f.name], v)
@@ -274,8 +311,18 @@ def validate_config(cfg: ControllerConfig, rig) -> list[str]:
     rng('theta_s', 1e-3, math.pi)
     rng('theta_0', 1e-3, math.pi)
     rng('friction_deadband', 0.0, 100.0)
+    rng('state_timeout_samples', 1, 1000)
+    # below the back-EMF cut-off omega_max = V_max/k_m (2.13), beyond which no braking torque
+    # along the motion can be produced any more
+    if not 1.0 <= cfg.wheel_speed_limit < rig.omega_max:
+        errors.append(f'wheel_speed_limit = {cfg.wheel_speed_limit:g} rad/s must be in [1, '
+                      f'{rig.omega_max:.1f}) (below the back-EMF cut-off V_max/k_m, (2.13))')
+    rng('max_saturation_time', rig.sample_period, 60.0)
     if errors:
         return errors
+    if abs(cfg.wheel_ref) >= cfg.wheel_speed_limit:
+        errors.append(f'wheel.ref = {cfg.wheel_ref:g} rad/s must stay below wheel_speed_limit = '
+                      f'{cfg.wheel_speed_limit:g} rad/s')
     if cfg.theta_0 < cfg.theta_s:
         errors.append(f'theta_0 = {cfg.theta_0:g} must be >= theta_s = {cfg.theta_s:g} (hysteresis)')
     # third-order wheel loops with the lag: Routh conditions
@@ -302,18 +349,20 @@ def config_with(cfg: ControllerConfig, values: Mapping[str, Any]) -> ControllerC
         name = PARAM_FIELDS.get(key, key)
         if name not in names:
             raise ValueError(f'unknown controller parameter {key!r}')
-        if name not in _BOOL_FIELDS and name not in _STR_FIELDS and isinstance(v, int) \
-                and not isinstance(v, bool):
+        if name not in _BOOL_FIELDS and name not in _STR_FIELDS and name not in _INT_FIELDS \
+                and isinstance(v, int) and not isinstance(v, bool):
             v = float(v)
         changes[name] = v
     return replace(cfg, **changes)
 
 
 class Controller:
-    """Mode switching + control laws + saturation + friction compensation.
+    """Mode switching + control laws + saturation + friction compensation + safety checks.
 
-    ``update(t, seq, theta, theta_dot, wheel_angle, wheel_rate, friction) -> (u, status)``,
-    theta from hanging (rad), rates rad/s, friction estimate in control units.
+    ``update(t, seq, theta, theta_dot, wheel_angle, wheel_rate, friction, now) -> (u, status)``,
+    theta from hanging (rad), rates rad/s, friction estimate in control units; t is the state's
+    stamp and ``now`` the controller's clock at its arrival (s; default t).  ``check_stale(now)``
+    from a periodic timer: the status of the zero command to send when the state went stale.
     """
 
     def __init__(self, rig, config: ControllerConfig | None = None, mode: str = 'off',
@@ -321,12 +370,14 @@ class Controller:
         self.rig = rig
         self.u_max = float(rig.u_max)
         self.omega_p = rig.omega_p
+        self.h = rig.sample_period
         self.max_wheel_rate = 2.0 * rig.omega_max
         cfg = config if config is not None else ControllerConfig.designed(rig)
         errors = validate_config(cfg, rig)
         if errors:
             raise ValueError('invalid controller configuration: ' + '; '.join(errors))
         self.config = cfg
+        self.watchdog = StateWatchdog(self._stale_after(cfg))
         self._build_laws()
         self.mode = 'off'
         self.law = 'off'
@@ -335,10 +386,14 @@ class Controller:
         self.switch_count = 0
         self.reason = 'start'
         self.bad_state_count = 0
+        self.overspeed_trips = 0
+        self.saturation_trips = 0
+        self.fall_trips = 0
         self.events: deque[SwitchEvent] = deque(maxlen=max_events)
         self._pending: SwitchEvent | None = None
         self._last_x: float | None = None          # last upright deviation seen
         self._capture_ref = False
+        self._sat_since: float | None = None       # balance saturated since (state time)
         if mode != 'off':
             ok, msg = self.set_mode(mode)
             if not ok:
@@ -357,6 +412,13 @@ class Controller:
             self._wheel_pi.integral = integral.integral
         self._wheel_pd = WheelAnglePD(c.wheel_angle_kpr, c.wheel_angle_kdr, c.wheel_angle_ref)
         self._friction = FrictionCompensation(c.friction_compensation, self.rig, c.friction_deadband)
+        self.watchdog.timeout = self._stale_after(c)
+
+    def _stale_after(self, cfg: ControllerConfig) -> float:
+        """Silence (s) after which the state is stale: state_timeout_samples h, plus h/2 so that
+        the last of those samples is really missing and not just being delivered (and a silence
+        of exactly N h in float arithmetic does not count)."""
+        return (cfg.state_timeout_samples + 0.5) * self.h
 
     def check_params(self, values: Mapping[str, Any]) -> tuple[bool, str, ControllerConfig | None]:
         """Dry run of :meth:`set_params`: (ok, reason, the new config)."""
@@ -396,14 +458,16 @@ class Controller:
         self.reason = reason
         self.events.append(ev)
         self._pending = ev
+        self._sat_since = None
 
     def set_mode(self, mode: str, t: float | None = None) -> tuple[bool, str]:
         """Request a mode; (ok, message).  Unknown modes, and ``balance`` with the pendulum
-        farther than theta_0 from upright, are refused (nothing changes)."""
+        farther than theta_0 from upright, are refused (nothing changes).  ``off`` also stops
+        a wheel brake in progress."""
         if mode not in MODES:
             return False, f'unknown mode {mode!r} (one of {", ".join(MODES)})'
         t = self.t if t is None else t
-        if mode == self.mode:
+        if mode == self.mode and not (mode == 'off' and self.law != 'off'):
             return True, f'already in {mode}'
         x = self._last_x
         if mode == 'balance':
@@ -435,7 +499,7 @@ class Controller:
     def _bad_state(self, theta, theta_dot, wheel_angle, wheel_rate, friction) -> str:
         for name, v in (('theta', theta), ('theta_dot', theta_dot), ('wheel_angle', wheel_angle),
                         ('wheel_rate', wheel_rate), ('friction', friction)):
-            if not isinstance(v, (int, float)) or not math.isfinite(v):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 return f'bad state: {name} = {v!r}'
         if abs(theta) > MAX_ANGLE or abs(wheel_angle) > MAX_ANGLE:
             return 'bad state: angle beyond 1e7 rad'
@@ -447,11 +511,94 @@ class Controller:
             return f'bad state: |friction| = {abs(friction):.4g} > {MAX_FRICTION:g}'
         return ''
 
+    def _law_output(self, t, x, theta, theta_dot, wheel_angle, wheel_rate) -> float:
+        """u of the current mode/law (unsaturated, without friction compensation); switches
+        law in ``auto`` and turns ``balance`` off beyond theta_0."""
+        mode = self.mode
+        if mode == 'auto':
+            law = self._auto_law(x, theta_dot)
+            if law != self.law:
+                if law == 'catch':
+                    why = f'catch: |theta-pi|={abs(x):.3f}<{self.config.theta_s:g}'
+                else:
+                    why = f'fall: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g}'
+                self._switch(t, 'auto', law, why)
+            if law == 'catch':
+                return self._patch(theta, theta_dot, wheel_angle, wheel_rate)
+            return self._swing(theta, theta_dot, wheel_rate)
+        if mode == 'balance':
+            if abs(x) > self.config.theta_0:
+                # out of the region where balance can catch it (Section 6.4): off, reported
+                self.fall_trips += 1
+                self._switch(t, 'off', 'off', f'fell: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g}')
+                return 0.0
+            if self._capture_ref:
+                self._capture_ref = False
+                self._balance.wheel_ref = self._balance_wheel_ref = wheel_angle
+            return self._balance(theta, theta_dot, wheel_angle, wheel_rate)
+        if mode == 'swingup':
+            return self._swing(theta, theta_dot, wheel_rate)
+        if mode == 'wheel_velocity':
+            return self._wheel_pi(wheel_rate)
+        if mode == 'wheel_angle':
+            return self._wheel_pd(wheel_angle, wheel_rate)
+        if self.law == 'brake':
+            w = motor_speed(theta_dot, wheel_rate)
+            if abs(w) < BRAKE_DONE_SPEED:
+                self._switch(t, 'off', 'off', f'wheel braked: |w| = {abs(w):.1f} < {BRAKE_DONE_SPEED:g} rad/s')
+                return 0.0
+            return brake(self.config.wheel_kp, w, self.u_max)
+        return 0.0
+
+    def _check_wheel_speed(self, t: float, theta_dot: float, wheel_rate: float) -> None:
+        """Overspeed (motor speed beyond ``wheel_speed_limit``, below the cut-off (2.13)) while
+        the controller drives the wheel: mode off, brake or zero torque, reported."""
+        if self.mode == 'off':
+            return
+        w = motor_speed(theta_dot, wheel_rate)
+        limit = self.config.wheel_speed_limit
+        if abs(w) > limit:
+            self.overspeed_trips += 1
+            action = self.config.wheel_speed_action
+            law = 'brake' if action == 'brake' else 'off'
+            self._switch(t, 'off', law, f'overspeed: |w| = {abs(w):.0f} > wheel_speed_limit = {limit:g} rad/s '
+                                        f'in {self.mode}/{self.law}: ' + ('braking' if law == 'brake' else 'u = 0'))
+
+    def _check_saturation(self, t: float, saturated: bool, x: float) -> bool:
+        """``balance`` saturated for longer than max_saturation_time -> saturation_action;
+        True when it switched."""
+        if self.mode != 'balance' or not saturated:
+            self._sat_since = None
+            return False
+        if self._sat_since is None or t < self._sat_since:
+            self._sat_since = t
+            return False
+        held = t - self._sat_since
+        c = self.config
+        if held <= c.max_saturation_time:
+            return False
+        self.saturation_trips += 1
+        action = c.saturation_action
+        why = f'saturated: |u| at {self.u_max:g} for {held:.3f} s > max_saturation_time = {c.max_saturation_time:g} s'
+        if action == 'auto':
+            self._switch(t, 'auto', 'catch' if abs(x) <= c.theta_0 else 'swingup', why + ': auto')
+        else:
+            self._switch(t, action, action, why + f': {action}')
+        return True
+
     def update(self, t: float, seq: int, theta: float, theta_dot: float, wheel_angle: float,
-               wheel_rate: float, friction: float = 0.0) -> tuple[float, Status]:
+               wheel_rate: float, friction: float = 0.0, now: float | None = None) -> tuple[float, Status]:
         """One sample: the command u (saturated) and the status."""
-        self.t = t
+        now = t if now is None else now
+        # a bad state is answered with u = 0 but is no fresh state for the watchdog
         fault = self._bad_state(theta, theta_dot, wheel_angle, wheel_rate, friction)
+        note = ''
+        if not fault:
+            ok, note = self.watchdog.admit(seq, now, t)
+            if not ok:
+                return 0.0, Status(t=self.t, seq=seq, mode=self.mode, law=self.law, last_switch=self.last_switch,
+                                   switch_count=self.switch_count, reason=self.reason, fault=note, answer=False)
+        self.t = t
         u_law = 0.0
         fc = 0.0
         if fault:
@@ -459,35 +606,13 @@ class Controller:
         else:
             x = upright_deviation(theta)
             self._last_x = x
-            mode = self.mode
-            if mode == 'auto':
-                law = self._auto_law(x, theta_dot)
-                if law != self.law:
-                    if law == 'catch':
-                        why = f'catch: |theta-pi|={abs(x):.3f}<{self.config.theta_s:g}'
-                    else:
-                        why = f'fall: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g}'
-                    self._switch(t, 'auto', law, why)
-                if law == 'catch':
-                    u_law = self._patch(theta, theta_dot, wheel_angle, wheel_rate)
-                else:
-                    u_law = self._swing(theta, theta_dot, wheel_rate)
-            elif mode == 'balance':
-                if abs(x) > self.config.theta_0:
-                    self._switch(t, 'off', 'off', f'fell: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g}')
-                else:
-                    if self._capture_ref:
-                        self._capture_ref = False
-                        self._balance.wheel_ref = self._balance_wheel_ref = wheel_angle
-                    u_law = self._balance(theta, theta_dot, wheel_angle, wheel_rate)
-            elif mode == 'swingup':
-                u_law = self._swing(theta, theta_dot, wheel_rate)
-            elif mode == 'wheel_velocity':
-                u_law = self._wheel_pi(wheel_rate)
-            elif mode == 'wheel_angle':
-                u_law = self._wheel_pd(wheel_angle, wheel_rate)
+            self._check_wheel_speed(t, theta_dot, wheel_rate)
+            u_law = self._law_output(t, x, theta, theta_dot, wheel_angle, wheel_rate)
             if self.mode != 'off':
                 fc = self._friction(theta_dot, wheel_rate, friction)
+            if self._check_saturation(t, abs(u_law + fc) > self.u_max, x):
+                u_law = self._law_output(t, x, theta, theta_dot, wheel_angle, wheel_rate)
+                fc = self._friction(theta_dot, wheel_rate, friction) if self.mode != 'off' else 0.0
         u_uns = u_law + fc
         umax = self.u_max
         u = umax if u_uns > umax else (-umax if u_uns < -umax else u_uns)
@@ -495,5 +620,24 @@ class Controller:
         status = Status(t=t, seq=seq, mode=self.mode, law=self.law, u=u, u_unsaturated=u_uns,
                         friction_compensation=fc, saturated=abs(u_uns) > umax,
                         last_switch=self.last_switch, switch_count=self.switch_count,
-                        reason=self.reason, fault=fault, event=ev)
+                        reason=self.reason, fault=fault, event=ev, note=note)
         return u, status
+
+    def check_stale(self, now: float) -> Status | None:
+        """From a periodic timer: when the state has just gone stale (no new state for
+        ``state_timeout_samples`` h), the status of the zero command to publish (answering
+        seq + 1 of the last state, so the plant applies it); None otherwise."""
+        if not self.watchdog.check(now):
+            return None
+        self._sat_since = None
+        wd = self.watchdog
+        n = self.config.state_timeout_samples
+        fault = (f'stale state: no new state for {wd.silence(now) * 1e3:.1f} ms (> {n} samples of '
+                 f'{self.h * 1e3:g} ms) after seq {wd.last_seq}; u = 0')
+        return Status(t=now, seq=min(wd.last_seq + 1, MAX_SEQ), mode=self.mode, law=self.law, u=0.0,
+                      last_switch=self.last_switch, switch_count=self.switch_count, reason=self.reason,
+                      fault=fault)
+
+    @property
+    def stale(self) -> bool:
+        return self.watchdog.stale

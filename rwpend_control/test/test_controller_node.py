@@ -22,7 +22,9 @@ def env():
     ctx = Context()
     rclpy.init(context=ctx, domain_id=100 + os.getpid() % 100)
     node = ControllerNode(context=ctx, namespace='/t', parameter_overrides=[
-        Parameter('balance.design.omega0', value='2wp'), Parameter('patch.kpp', value=-389.0)])
+        Parameter('balance.design.omega0', value='2wp'), Parameter('patch.kpp', value=-389.0),
+        # states come every ~5 ms here: keep the stale-state watchdog out of this test
+        Parameter('state_timeout_samples', value=1000)])
     peer = Node('peer', context=ctx, namespace='/t')
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)

@@ -6,6 +6,13 @@ time), subscribes ``command`` (MotorCommand), publishes ``/diagnostics``.  Manag
 publish; deactivate = zero torque, amplifier off; cleanup = close.  ``autostart`` (default
 true) configures and activates at start (retrying configure while the device is absent).
 
+Latched e-stop, as on the simulator: topic ``estop`` (std_msgs/Bool, transient local) and
+service ``~/estop`` (std_srvs/SetBool; ``./rwpend estop [--clear]``).  Raised, it zeros the
+motor and disables the amplifier at once (a zero command, then ENABLE 0), refuses every
+command, and holds so -- across reconnections and lifecycle transitions -- until it is
+explicitly cleared; cleared, the amplifier is enabled again and the torque stays zero until a
+fresh command arrives.  Encoders keep streaming throughout.
+
 All protocol and link logic lives in :mod:`rwpend_driver.link` / :mod:`rwpend_driver.protocol`.
 """
 from __future__ import annotations
@@ -17,9 +24,12 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from std_msgs.msg import Bool
+from std_srvs.srv import SetBool
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand
-from rwpend_ros.common import QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, diagnostic_status, run_node
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError,
+                               diagnostic_status, run_node)
 
 from .link import DriverLink, LinkConfig
 
@@ -68,11 +78,15 @@ class DriverNode(LifecycleNode):
         self.lifecycle = 'unconfigured'
         self.configure_failures = 0
         self.last_configure_error = ''
+        self.estop = False
+        self.estop_commands = 0          # commands refused because of the e-stop
         self.enc = EncoderCounts()
         self.enc.header.frame_id = p['frame_id']
         self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
+        self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
+        self.create_service(SetBool, '~/estop', self.on_estop_service)
         self.create_timer(p['diagnostics_period'], self.publish_diagnostics)
         self.autostart_timer = None
         if p['autostart']:
@@ -127,7 +141,7 @@ class DriverNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.link.set_active(True)
+        self.link.set_active(not self.estop)    # a latched e-stop keeps the amplifier off
         self.active = True
         self.lifecycle = 'active'
         self.get_logger().info('active: amplifier enabled, zero torque until commands arrive')
@@ -191,15 +205,48 @@ class DriverNode(LifecycleNode):
 
     def on_command(self, msg: MotorCommand) -> None:
         link = self.link
+        if self.estop:
+            self.estop_commands += 1
+            return
         if link is None or not self.active:
             return
         link.command(msg.seq, msg.u)
 
+    # ------------------------------------------------------------ e-stop
+    def set_estop(self, on: bool) -> str:
+        changed = self.estop != on
+        self.estop = on
+        link = self.link
+        if link is not None and self.active:
+            link.set_active(not on)     # off: zero command + ENABLE 0; on: ENABLE 1, zero until a command
+        if changed:
+            # one call site per severity: rclpy refuses a severity change at a call site
+            if on:
+                self.get_logger().warning('E-STOP raised: motor at zero, amplifier disabled')
+            else:
+                self.get_logger().info('e-stop cleared')
+            self.publish_diagnostics()
+        return ('e-stop raised: motor at zero, amplifier disabled until cleared' if on
+                else 'e-stop cleared')
+
+    def on_estop_topic(self, msg: Bool) -> None:
+        self.set_estop(bool(msg.data))
+
+    def on_estop_service(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
+        resp.message = self.set_estop(bool(req.data))
+        resp.success = True
+        return resp
+
     # ------------------------------------------------------------ diagnostics
     def publish_diagnostics(self) -> None:
         link = self.link
-        values = {'lifecycle': self.lifecycle, 'port': self.cfg.port}
-        if link is None:
+        values = {'lifecycle': self.lifecycle, 'port': self.cfg.port, 'estop': self.estop,
+                  'estop_commands': self.estop_commands}
+        if self.estop:
+            level, msg = DiagnosticStatus.ERROR, 'e-stop latched: motor at zero, amplifier disabled'
+            if link is not None:
+                values.update(link.snapshot())
+        elif link is None:
             level = DiagnosticStatus.ERROR if self.last_configure_error else DiagnosticStatus.WARN
             msg = (f'not configured: {self.last_configure_error}' if self.last_configure_error
                    else 'not configured')

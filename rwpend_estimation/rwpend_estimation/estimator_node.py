@@ -29,6 +29,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
+from rwpend_ros import wire
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status,
                                run_node)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
@@ -87,7 +88,7 @@ class EstimatorNode(Node):
         self.u = 0.0             # latest command received (clamped), for diagnostics
         self.u_seq = -1          # seq answered by the latest command
         self.commands: dict[int, float] = {}   # recent commands by the seq they answer
-        self.pending: EncoderCounts | None = None
+        self.pending: Sample | None = None
         self.deferred = 0        # samples that waited for their command
         self.u_max = self.rig.u_max
         # counters
@@ -104,14 +105,15 @@ class EstimatorNode(Node):
         self.pub_state = self.create_publisher(StateEstimate, 'state', QOS_CONTROL_PUB)
         self.pub_joints = self.create_publisher(JointState, 'joint_states', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        self.create_subscription(EncoderCounts, 'encoders', self.on_encoders, QOS_CONTROL)
-        self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
+        # the per-sample path takes and publishes wire bytes (rwpend_ros.wire): no message
+        # objects built or converted field by field (measured: PERFORMANCE.md)
+        self.create_subscription(EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL, raw=True)
+        self.create_subscription(MotorCommand, 'command', self.on_command_raw, QOS_CONTROL, raw=True)
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.create_timer(float(period), self.publish_diagnostics)
 
-        self.state_msg = StateEstimate()
-        self.joint_msg = JointState()
-        self.joint_msg.name = ['pendulum', 'wheel']
+        self.state_packer = wire.StatePacker(self.config.estimator)
+        self.joint_packer = wire.JointStatePacker(('pendulum', 'wheel'))
         self.get_logger().info(f'estimator {self.config.estimator}, h = {self.rig.sample_period * 1e3:g} ms, '
                                f'friction source {self.config.friction_source}')
 
@@ -130,6 +132,8 @@ class EstimatorNode(Node):
             self._candidate(params)
         except ValueError as exc:
             reasons.append(str(exc))
+        except Exception as exc:  # noqa: BLE001 - a malformed request must not kill the node
+            reasons.append(f'refused: {type(exc).__name__}: {exc}')
         return SetParametersResult(successful=not reasons, reason='; '.join(reasons))
 
     def on_parameters_set(self, params) -> None:
@@ -144,19 +148,25 @@ class EstimatorNode(Node):
             return
         self.est = switch_estimator(self.est, config)
         self.config = config
+        self.state_packer.set_estimator(config.estimator)
         self.switches += 1
         self.get_logger().info(f'estimator settings: {config}')
 
     # ------------------------------------------------------------ callbacks
     def on_command(self, msg: MotorCommand) -> None:
-        u = msg.u
+        self.command(int(msg.seq), msg.u)
+
+    def on_command_raw(self, data: bytes) -> None:
+        seq, u = wire.unpack_command(data)
+        self.command(seq, u)
+
+    def command(self, seq: int, u: float) -> None:
         if not math.isfinite(u):
             self.refused_commands += 1
             self.last_error = f'non-finite command u={u!r} ignored'
             return
         um = self.u_max
         self.u = um if u > um else (-um if u < -um else u)
-        seq = int(msg.seq)
         self.commands[seq] = self.u
         if len(self.commands) > 64:
             del self.commands[next(iter(self.commands))]
@@ -167,6 +177,14 @@ class EstimatorNode(Node):
             self.process(p)
 
     def on_encoders(self, msg: EncoderCounts) -> None:
+        st = msg.header.stamp
+        self.sample(Sample(wire.pack_header(st.sec, st.nanosec, msg.header.frame_id), int(msg.seq),
+                           msg.pendulum_counts, msg.motor_counts))
+
+    def on_encoders_raw(self, data: bytes) -> None:
+        self.sample(Sample(*wire.unpack_encoders(data)))
+
+    def sample(self, msg: 'Sample') -> None:
         """Sample k is estimated with the command that answered sample k-1 (held over
         [t_{k-1}, t_k), the u of (3.5)/(7.1)). The two arrive on different topics from different
         processes, in either order; while the controller is answering (its last command is at
@@ -193,7 +211,7 @@ class EstimatorNode(Node):
         older = [s for s in self.commands if s < k]
         return self.commands[max(older)] if older else 0.0
 
-    def process(self, msg: EncoderCounts) -> None:
+    def process(self, msg: 'Sample') -> None:
         if self.last_seq is not None and msg.seq < self.last_seq:
             # the plant restarted its sample counter (driver reconnect, simulator restart)
             self.commands.clear()
@@ -209,19 +227,11 @@ class EstimatorNode(Node):
         if self.last_seq is not None and msg.seq != self.last_seq + 1:
             self.seq_gaps += 1
         self.last_seq = msg.seq
-        s = self.state_msg
-        s.header = msg.header
-        s.seq = msg.seq
-        s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate = e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate
-        s.friction, s.energy = e.friction, e.energy
-        s.estimator = self.config.estimator
-        self.pub_state.publish(s)
+        self.pub_state.publish(self.state_packer.pack(
+            msg.header, msg.seq, e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate, e.friction, e.energy))
         if self.publish_joint_states:
-            j = self.joint_msg
-            j.header = msg.header
-            j.position = [e.theta, e.wheel_angle - e.theta]
-            j.velocity = [e.theta_dot, e.wheel_rate - e.theta_dot]
-            self.pub_joints.publish(j)
+            self.pub_joints.publish(self.joint_packer.pack(
+                msg.header, e.theta, e.wheel_angle - e.theta, e.theta_dot, e.wheel_rate - e.theta_dot))
 
     def on_reset(self, req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         self.est.reset()
@@ -253,6 +263,16 @@ class EstimatorNode(Node):
                 'switches': self.switches,
             })]
         self.pub_diag.publish(arr)
+
+
+class Sample:
+    """One encoder sample: the header as its wire bytes (copied into state and joint_states)."""
+
+    __slots__ = ('header', 'seq', 'pendulum_counts', 'motor_counts')
+
+    def __init__(self, header: bytes, seq: int, pendulum_counts: int, motor_counts: int) -> None:
+        self.header, self.seq = header, seq
+        self.pendulum_counts, self.motor_counts = pendulum_counts, motor_counts
 
 
 def main(args=None) -> int:

@@ -95,13 +95,67 @@ def spin_executor(executor, until: Callable[[], bool] | None = None) -> None:
             break
 
 
+def apply_scheduling(environ: Mapping[str, str] | None = None) -> dict:
+    """Process priority and CPU affinity from the environment (set by the launcher per node).
+
+    * ``RWPEND_RT_PRIORITY=N`` (1-99): SCHED_FIFO priority N; a FIFO thread runs as soon as it is
+      runnable, ahead of every ordinary process on the host. Falls back to ``nice -10`` where
+      real-time scheduling is not permitted.
+    * ``RWPEND_NICE=N``: nice value (negative needs privileges; refused silently otherwise).
+    * ``RWPEND_CPUS=0,1``: CPU affinity.
+
+    Call it before ``rclpy.init``: threads inherit the policy of the thread that creates them,
+    so the DDS threads created later get it too. Never fails: what is not permitted is left
+    as it is, and reported in the returned dict (``{'rt': .., 'nice': .., 'cpus': ..}``).
+    """
+    env = os.environ if environ is None else environ
+    done: dict = {}
+    prio = env.get('RWPEND_RT_PRIORITY', '').strip()
+    if prio and prio != '0':
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(prio)))
+            done['rt'] = int(prio)
+        except (OSError, ValueError, AttributeError) as exc:
+            done['rt'] = f'not permitted ({exc})'
+            env = {**env, 'RWPEND_NICE': env.get('RWPEND_NICE') or '-10'}
+            print(f'rwpend: real-time priority {prio} not permitted ({exc}); trying nice -10',
+                  file=sys.stderr, flush=True)
+    nice = env.get('RWPEND_NICE', '').strip()
+    if nice:
+        try:
+            done['nice'] = os.nice(int(nice) - os.nice(0))
+        except (OSError, ValueError) as exc:
+            done['nice'] = f'not permitted ({exc})'
+    cpus = env.get('RWPEND_CPUS', '').strip()
+    if cpus:
+        try:
+            os.sched_setaffinity(0, {int(c) for c in cpus.split(',') if c.strip()})
+            done['cpus'] = sorted(os.sched_getaffinity(0))
+        except (OSError, ValueError, AttributeError) as exc:
+            done['cpus'] = f'not permitted ({exc})'
+    return done
+
+
+def freeze_gc() -> None:
+    """Collect once, then move every object alive now (modules, nodes, ...) out of the cyclic
+    garbage collector's reach (``gc.freeze``): a full collection of a node process otherwise
+    walks ~40 000 objects and stalls it for milliseconds (measured 2.7 ms for generation 1 and
+    32 ms for generation 2 in an estimator + controller process), which shows up as late samples.
+    Later garbage is still collected. ``RWPEND_GC_FREEZE=0`` turns it off (for comparisons)."""
+    if os.environ.get('RWPEND_GC_FREEZE', '1') != '0':
+        import gc
+        gc.collect()
+        gc.freeze()
+
+
 def run_node(factory: Callable[[], Any], args: list[str] | None = None) -> int:
     """Run one node in this process until SIGINT/SIGTERM; returns the exit status.
 
     ``factory()`` builds the node (after rclpy.init). A ConfigError while building is
     printed and gives status 2. A node may define ``close()``, called before destruction
-    (e.g. to zero the motor or finalise a file).
+    (e.g. to zero the motor or finalise a file). Priority / affinity: :func:`apply_scheduling`.
     """
+    apply_scheduling()
     rclpy.init(args=args)
     node = None
     status = 0
@@ -109,6 +163,7 @@ def run_node(factory: Callable[[], Any], args: list[str] | None = None) -> int:
         node = factory()
         executor = make_executor()
         executor.add_node(node)
+        freeze_gc()
         spin_executor(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

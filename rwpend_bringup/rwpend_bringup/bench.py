@@ -1,0 +1,569 @@
+"""``./rwpend bench`` -- the real-time / lockstep benchmark of the whole stack (issue 8).
+
+What it runs (every run is the full stack started by :class:`rwpend_bringup.launch.Launcher`
+from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` runs, with
+``--rt-priority 50`` unless told otherwise):
+
+1. **real time**, for each sample period h (default 1 ms and 0.5 ms) and each layout (separate
+   processes, and ``--composed``: plant, estimator and controller in one process): simulator on
+   the wall clock, estimator, controller in ``auto`` (swing-up, catch, balance), recorder. The
+   measured window opens ``SETTLE_S`` s after the start (the loop is running by then) and lasts
+   ``--duration`` s (default 60). From the bag, over the samples whose instant lies in the window:
+
+   * sensor-to-command latency -- from the instant of sample k (the encoders' header stamp: the
+     simulator's ideal k*h grid, on the system clock) to the recorder receiving command seq k
+     (the seq echo); p50/p99/p99.9/max. An upper bound of what the plant sees: the recorder is
+     one more DDS reader, with its own scheduling delay;
+   * late samples -- ``late_fraction``: command k received (by the recorder) after the instant
+     of sample k+1, or never; ``plant_late_fraction``: what the plant actually held over
+     [t_k, t_k+1) (``sim/true_state.u_commanded`` of sample k+1) was not command k -- exact, and
+     independent of the recorder's timing (see :func:`plant_late`);
+   * sample-period jitter -- from the recorder's receive times of ``encoders`` (an upper bound
+     of the simulator's publishing jitter);
+   * dropped messages per topic -- seq gaps seen by the recorder (``recording_report.json``);
+   * CPU per process -- ``/proc/PID/stat`` utime+stime over the window, in cores (1.0 = one core
+     busy); and the CPU of every *other* process on the host in the same window
+     (``other_cpu_cores``: the figures of a shared machine depend on it), plus the load average.
+
+2. **lockstep** throughput (simulated s per wall s) of the full pipeline, with and without the
+   recorder, from the simulator's own "N s simulated in M s wall" report, and the CPU seconds of
+   all processes per simulated second.
+3. **bag decode** throughput of rwpend_bag's reader (read + column-wise CDR decode of the
+   biggest real-time bag): messages/s.
+
+Results: printed, and written to ``OUTDIR/bench.json`` (plus each run's log; bags with
+``--keep-bags``). PERFORMANCE.md has the figures of this machine.
+"""
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import os
+import platform
+import re
+import shutil
+import sys
+import threading
+import time
+from pathlib import Path
+
+from .launch import Launcher
+
+DEFAULT_PERIODS = (0.001, 0.0005)
+SETTLE_S = 4.0            # wall seconds after start before the measured window opens
+LOCKSTEP_WALL_LIMIT = 600.0
+
+
+# ------------------------------------------------------------------ helpers
+class _Tee(io.TextIOBase):
+    """File-like for Launcher(out=...): keeps the lines and writes them to a log file."""
+
+    def __init__(self, path: Path, echo=None):
+        self.f = open(path, 'w', encoding='utf-8')
+        self.lines: list[str] = []
+        self.times: list[float] = []      # monotonic time each line was seen
+        self.echo = echo
+        self._lock = threading.Lock()
+
+    def write(self, s: str) -> int:
+        with self._lock:
+            self.f.write(s)
+            now = time.monotonic()
+            for x in s.splitlines():
+                if x:
+                    self.lines.append(x)
+                    self.times.append(now)
+            if self.echo is not None:
+                self.echo.write(s)
+        return len(s)
+
+    def flush(self) -> None:
+        with self._lock:
+            self.f.flush()
+
+    def close(self) -> None:
+        self.f.close()
+
+
+def _clk_tck() -> int:
+    try:
+        return os.sysconf('SC_CLK_TCK')
+    except (ValueError, OSError):  # pragma: no cover
+        return 100
+
+
+def proc_cpu_s(pid: int) -> float | None:
+    """utime + stime of a process (all its threads), seconds; None if it is gone."""
+    try:
+        with open(f'/proc/{pid}/stat', 'rb') as f:
+            data = f.read().decode()
+    except OSError:
+        return None
+    rest = data[data.rindex(')') + 2:].split()   # fields after "pid (comm) "
+    return (int(rest[11]) + int(rest[12])) / _clk_tck()   # fields 14, 15 of stat(5)
+
+
+def cpu_snapshot(launcher: Launcher) -> dict[str, float | None]:
+    return {name: proc_cpu_s(p.pid) for name, p in launcher.procs.items()}
+
+
+def all_cpu_snapshot() -> dict[int, float]:
+    """utime + stime of every process on the host (to measure the load of everyone else)."""
+    out = {}
+    for d in os.listdir('/proc'):
+        if d.isdigit():
+            v = proc_cpu_s(int(d))
+            if v is not None:
+                out[int(d)] = v
+    return out
+
+
+def other_cpu_cores(before: dict[int, float], after: dict[int, float], ours: set[int],
+                    window: float) -> float | None:
+    """CPU (cores) used during the window by processes other than the benchmark's (a lower bound:
+    processes that ended inside the window are not seen)."""
+    if window <= 0:
+        return None
+    total = sum(v - before.get(pid, 0.0) for pid, v in after.items() if pid not in ours)
+    return round(max(total, 0.0) / window, 3)
+
+
+def percentiles(values, qs=(50, 99, 99.9)) -> dict:
+    import numpy as np
+    v = np.asarray(values, dtype=float)
+    if v.size == 0:
+        return {f'p{q:g}': None for q in qs} | {'max': None, 'n': 0}
+    out = {f'p{q:g}': float(np.percentile(v, q)) for q in qs}
+    out['max'] = float(v.max())
+    out['n'] = int(v.size)
+    return out
+
+
+def machine_info() -> dict:
+    model = ''
+    try:
+        for line in Path('/proc/cpuinfo').read_text().splitlines():
+            if line.startswith('model name'):
+                model = line.split(':', 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        affinity = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover
+        affinity = None
+    return {'cpus': os.cpu_count(), 'cpus_usable': affinity, 'cpu_model': model,
+            'kernel': platform.release(), 'python': platform.python_version(),
+            'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp'),
+            'executor': os.environ.get('RWPEND_EXECUTOR', 'events'),
+            'loadavg_start': _loadavg()}
+
+
+def _loadavg() -> list[float] | None:
+    try:
+        return [float(x) for x in Path('/proc/loadavg').read_text().split()[:3]]
+    except OSError:
+        return None
+
+
+# ------------------------------------------------------------------ running the stack
+def _stack(up_args: list[str]):
+    """(parsed args, specs, params files) of ``./rwpend up UP_ARGS`` (cli.build_stack)."""
+    from .cli import Parser, add_stack_args, build_stack
+    p = Parser(prog='rwpend bench')
+    add_stack_args(p)
+    a = p.parse_args(up_args)
+    specs, files = build_stack(a, p.prog)
+    return a, specs, files
+
+
+def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
+                 ns: str, echo=None, up_extra=(), spec_hook=None, tag: str | None = None) -> dict:
+    tag = tag or f'rt_{layout}_h{h * 1e6:g}us'
+    bag = out / tag
+    if bag.exists():
+        shutil.rmtree(bag)
+    up = ['--mode', 'auto', '--h', repr(h), '--record', str(bag), '--ns', ns, *up_extra]
+    if layout == 'composed':
+        up.append('--composed')
+    a, specs, files = _stack(up)
+    if spec_hook is not None:
+        spec_hook(specs)
+    log = _Tee(out / f'{tag}.log', echo)
+    launcher = Launcher(specs, namespace=a.ns, params_files=files, env=env, out=log)
+    load0 = _loadavg()
+    try:
+        launcher.start()
+        # the loop starts once every node is up and connected (the simulator holds sample 0 until
+        # the estimator and the recorder listen): the measured window opens SETTLE_S s later
+        reason = launcher.wait(SETTLE_S)
+        a0 = all_cpu_snapshot()
+        t0, w0, c0 = time.monotonic(), time.time_ns(), cpu_snapshot(launcher)
+        if reason == 'duration':
+            reason = launcher.wait(duration)
+        t1, w1, c1 = time.monotonic(), time.time_ns(), cpu_snapshot(launcher)
+        a1 = all_cpu_snapshot()
+        ours = {os.getpid(), *(p.pid for p in launcher.procs.values())}
+    finally:
+        codes = launcher.stop()
+        log.close()
+    window = t1 - t0
+    cpu = {n: (None if c0[n] is None or c1[n] is None else round((c1[n] - c0[n]) / window, 4))
+           for n in c0}
+    res = {'layout': layout, 'h_s': h, 'rate_hz': round(1.0 / h), 'wall_s': round(window + SETTLE_S, 3),
+           'stop_reason': reason, 'exit_codes': codes, 'bag': str(bag), 'log': str(out / f'{tag}.log'),
+           'loadavg_before': load0, 'loadavg_after': _loadavg(),
+           'other_cpu_cores': other_cpu_cores(a0, a1, ours, window),
+           'other_cpu_source': 'CPU of every other process on the host during the window (lower bound)'}
+    res['cpu_cores'] = cpu
+    res['cpu_cores_total'] = round(sum(v for v in cpu.values() if v is not None), 4)
+    res['cpu_window_s'] = round(window, 3)
+    res.update(bag_metrics(bag, ns, h, (w0, w1)))
+    return res
+
+
+def bag_metrics(bag: Path, ns: str, h: float, window_ns: tuple[int, int] | None = None) -> dict:
+    """Jitter, latency, late samples and drops of a real-time run, from its bag.
+
+    The samples analysed are those whose sample instant (the encoders' header stamp: the ideal
+    grid t0 + k*h of the simulator, on the system clock like the recorder's receive times) lies
+    in ``window_ns`` (the CPU window), up to the last sample that has a successor.
+    """
+    import numpy as np
+
+    from rwpend_bag.analysis import _decode
+    from rwpend_bag.reader import read_bag
+    b = read_bag(bag)
+    nsp = ns.rstrip('/')
+    t_enc, t_cmd = f'{nsp}/encoders', f'{nsp}/command'
+    m: dict = {}
+    report = {}
+    rf = Path(bag) / 'recording_report.json'
+    if rf.is_file():
+        report = json.loads(rf.read_text()).get('topics', {})
+    dropped = {}
+    for name in (t_enc, f'{nsp}/sim/true_state', f'{nsp}/state', t_cmd):
+        r = report.get(name)
+        dropped[name] = None if r is None else r.get('missing')
+    m['dropped'] = dropped
+    m['dropped_source'] = 'seq gaps seen by the recorder over the whole run (recording_report.json)'
+    if t_enc not in b.topics or t_cmd not in b.topics or not b.topics[t_cmd].count:
+        m['error'] = 'no encoders/command in the bag'
+        m['samples'] = 0
+        m['jitter_us'] = m['period_us'] = m['latency_us'] = None
+        m['late_fraction'] = None
+        return m
+    enc = _decode(b, t_enc, ['header.stamp.sec', 'header.stamp.nanosec', 'seq'])
+    cmd = _decode(b, t_cmd, ['seq', 'u'])
+    es, el, est = enc['seq'].astype(np.int64), enc['_log_ns'].astype(np.int64), enc['_stamp_ns']
+    cs, cl = cmd['seq'].astype(np.int64), cmd['_log_ns'].astype(np.int64)
+    n = int(max(es.max(), cs.max())) + 2
+    # per seq: sample instant, receive times at the recorder (first arrival); -1 = none
+    ts = np.full(n, -1, np.int64)
+    te = np.full(n, -1, np.int64)
+    tc = np.full(n, -1, np.int64)
+    ts[es[::-1]] = est[::-1]
+    te[es[::-1]] = el[::-1]
+    tc[cs[::-1]] = cl[::-1]
+    have = (ts >= 0) & (np.roll(ts, -1) >= 0)          # sample k and k+1 were recorded
+    have[-1] = False
+    if window_ns is not None:
+        have &= (ts >= window_ns[0]) & (ts <= window_ns[1])
+    # the controller starts answering once it has discovered the loop: start at its first command
+    have &= np.arange(n) >= cs.min()
+    ks = np.nonzero(have)[0]
+    m['samples'] = int(ks.size)
+    if not ks.size:
+        m['error'] = 'no sample in the measured window'
+        m['jitter_us'] = m['period_us'] = m['latency_us'] = None
+        m['late_fraction'] = None
+        return m
+    m['window_seq'] = [int(ks[0]), int(ks[-1])]
+    answered = tc[ks] >= 0
+    lat = (tc[ks] - ts[ks])[answered] / 1e3
+    # late: command k not received (by the recorder) before the instant of sample k+1
+    late = ~answered | (tc[ks] > ts[ks + 1])
+    m['latency_us'] = percentiles(lat)
+    m['latency_source'] = ('sample instant of encoders seq k (header stamp, the ideal k*h grid on the '
+                           'system clock) to the recorder receiving command seq k (seq echo): an upper '
+                           'bound of what the plant sees (the recorder is one more DDS reader)')
+    m['late_samples'] = int(late.sum())
+    m['unanswered_samples'] = int((~answered).sum())
+    m['late_fraction'] = float(late.mean())
+    m['late_definition'] = 'command k received after the instant of sample k+1, or never'
+    m.update(plant_late(b, nsp, h, cs, cmd, ks))
+    both = answered & (te[ks] >= 0)
+    m['loop_us'] = percentiles((tc[ks] - te[ks])[both] / 1e3)
+    m['loop_source'] = 'recorder receive time of command seq k minus that of encoders seq k'
+    pub = te[ks][te[ks] >= 0] - ts[ks][te[ks] >= 0]
+    m['encoders_delay_us'] = percentiles(pub / 1e3)
+    m['encoders_delay_source'] = ('sample instant to the recorder receiving encoders seq k (the '
+                                  "simulator's wake-up and publish delay plus one DDS hop)")
+    tk = te[ks]
+    tk = tk[tk >= 0]
+    period = np.diff(tk) / 1e3
+    m['period_us'] = percentiles(period, (50, 99))
+    m['period_us']['min'] = float(period.min()) if period.size else None
+    m['jitter_us'] = percentiles(np.abs(period - h * 1e6), (50, 99, 99.9))
+    m['jitter_source'] = ('recorder receive times of encoders (header stamps are the ideal k*h '
+                          'grid by construction); |period - h|')
+    return m
+
+
+def plant_late(b, nsp: str, h: float, cs, cmd, ks) -> dict:
+    """Late commands as the plant saw them, independent of the recorder's timing.
+
+    ``sim/true_state`` of sample k+1 carries ``u_commanded``, the command the simulator held over
+    [t_k, t_{k+1}): the PWM-quantized u of command k if it had arrived when the simulator
+    integrated that interval, else an older one (or 0 after the command timeout). Over the
+    samples whose command differs (after quantization) from the previous one -- elsewhere the
+    two cannot be told apart -- late = the plant held something else than command k.
+    """
+    import numpy as np
+
+    from rwpend_bag.analysis import _decode
+    from rwpend_model.plant import Plant
+    from rwpend_model.rig import load_rig
+    t_true = f'{nsp}/sim/true_state'
+    if t_true not in b.topics or not b.topics[t_true].count:
+        return {'plant_late_fraction': None}
+    tr = _decode(b, t_true, ['seq', 'u_commanded'])
+    n = int(max(tr['seq'].max(), cs.max())) + 2
+    held = np.full(n, np.nan)
+    held[tr['seq'].astype(np.int64)] = tr['u_commanded']
+    q = np.vectorize(Plant(load_rig(overrides={'rig.sample_period': h})).quantize_command, otypes=[float])
+    uq = np.full(n, np.nan)
+    uq[cs] = q(cmd['u'])
+    k = ks[(ks >= 1) & (ks + 1 < n)]
+    k = k[~np.isnan(uq[k]) & ~np.isnan(uq[k - 1]) & ~np.isnan(held[k + 1])]
+    told = k[uq[k] != uq[k - 1]]
+    late = held[told + 1] != uq[told]
+    return {'plant_late_fraction': float(late.mean()) if told.size else None,
+            'plant_late_samples': int(late.sum()), 'plant_judged_samples': int(told.size),
+            'plant_late_source': ('sim/true_state u_commanded of sample k+1 vs the quantized u of '
+                                  'command k, over the samples where command k differs from command '
+                                  'k-1')}
+
+
+def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, env: dict,
+                 ns: str, echo=None, up_extra=(), spec_hook=None, tag: str | None = None) -> dict:
+    tag = tag or f'ls_{layout}_h{h * 1e6:g}us_{"rec" if record else "norec"}'
+    up = ['--lockstep', '--mode', 'auto', '--duration', repr(sim_s), '--h', repr(h), '--ns', ns,
+          *up_extra]
+    bag = out / tag
+    if record:
+        if bag.exists():
+            shutil.rmtree(bag)
+        up += ['--record', str(bag)]
+    if layout == 'composed':
+        up.append('--composed')
+    a, specs, files = _stack(up)
+    if spec_hook is not None:
+        spec_hook(specs)
+    log = _Tee(out / f'{tag}.log', echo)
+    launcher = Launcher(specs, namespace=a.ns, params_files=files, env=env, out=log)
+    t0 = time.monotonic()
+    load0 = _loadavg()
+    polls: list[tuple[float, dict]] = []    # (time, CPU s per node), every 50 ms
+    try:
+        launcher.start()
+        reason = 'duration'
+        while reason == 'duration' and time.monotonic() - t0 < LOCKSTEP_WALL_LIMIT:
+            snap = cpu_snapshot(launcher)
+            if polls:   # a process that has ended keeps its last figure
+                snap = {n: (polls[-1][1].get(n) if v is None else v) for n, v in snap.items()}
+            polls.append((time.monotonic(), snap))
+            reason = launcher.wait(0.05)
+    finally:
+        codes = launcher.stop()
+        log.close()
+    total = time.monotonic() - t0
+    simulated = wall = t_end = None
+    for line, t in zip(log.lines, log.times):
+        mt = re.search(r'duration reached: ([0-9.]+) s simulated in ([0-9.]+) s wall', line)
+        if mt:
+            simulated, wall, t_end = float(mt.group(1)), float(mt.group(2)), t
+    res = {'layout': layout, 'h_s': h, 'recorder': record, 'simulated_s': simulated,
+           'wall_s': wall, 'sim_per_wall': None if not wall else round(simulated / wall, 3),
+           'total_wall_s': round(total, 2), 'stop_reason': reason, 'exit_codes': codes,
+           'log': str(out / f'{tag}.log'), 'bag': str(bag) if record else None,
+           'loadavg_before': load0, 'loadavg_after': _loadavg()}
+    # CPU of each process over the run (sample 0 to the end), from the 50 ms polls
+    if wall and t_end is not None and polls:
+        def at(t):
+            return min(polls, key=lambda p: abs(p[0] - t))
+        (ta, ca), (tb, cb) = at(t_end - wall), at(t_end)
+        cpu = {n: (None if ca.get(n) is None or cb.get(n) is None else round(cb[n] - ca[n], 3))
+               for n in cb}
+        res['cpu_s'] = cpu
+        res['cpu_window_s'] = round(tb - ta, 3)
+        known = [v for v in cpu.values() if v is not None]
+        res['cpu_s_per_simulated_s'] = round(sum(known) / simulated, 3) if known and simulated else None
+    return res
+
+
+def run_decode(bag: Path) -> dict:
+    from rwpend_bag.analysis import bench_decode
+    r = bench_decode(str(bag), repeat=3)
+    r.pop('topics', None)
+    r['bag'] = str(bag)
+    for k in ('decode_s', 'read_s', 'msgs_per_s', 'read_msgs_per_s'):
+        if r.get(k) is not None:
+            r[k] = round(r[k], 4 if k.endswith('_s') else 0)
+    n, read_s, dec_s = r['messages'], r.get('read_s'), r.get('decode_s')
+    r['read_and_decode_msgs_per_s'] = (round(n / (read_s + dec_s)) if read_s and dec_s else None)
+    return r
+
+
+# ------------------------------------------------------------------ report
+def _fmt(v, nd=0):
+    return 'n/a' if v is None else f'{v:.{nd}f}'
+
+
+def summary_text(res: dict) -> str:
+    m = res['machine']
+    st = res['settings']
+    lines = ['rwpend bench -- ' + time.strftime('%Y-%m-%d %H:%M', time.localtime(res['started'])),
+             f"machine: {m['cpus']} CPU ({m['cpu_model']}), Python {m['python']}, {m['rmw']}, executor "
+             f"{m['executor']}; load average {m.get('loadavg_start')} -> {m.get('loadavg_end')}",
+             f"settings: rt priority {st.get('rt_priority')}, {st['duration_s']:g} s real time, "
+             f"{st['lockstep_duration_s']:g} s lockstep"]
+    if res['realtime']:
+        lines.append('real time (recorder running). latency = sample instant -> command at the recorder '
+                     '(us); late = command k after sample k+1')
+        lines.append(f"  {'layout':<9} {'rate':>6} {'samples':>8} {'lat p50':>8} {'p99':>7} {'p99.9':>7} "
+                     f"{'max':>7} {'late%':>7} {'plant%':>7} {'jit p99':>8} {'dropped':>8} {'CPU':>5} {'other':>6}")
+        for r in res['realtime']:
+            lat = r.get('latency_us') or {}
+            jit = r.get('jitter_us') or {}
+            drops = [v for v in (r.get('dropped') or {}).values() if v is not None]
+            late, plate = r.get('late_fraction'), r.get('plant_late_fraction')
+            lines.append(
+                f"  {r['layout']:<9} {r['rate_hz']:>4}Hz {r.get('samples', 0):>8} {_fmt(lat.get('p50')):>8} "
+                f"{_fmt(lat.get('p99')):>7} {_fmt(lat.get('p99.9')):>7} {_fmt(lat.get('max')):>7} "
+                f"{_fmt(None if late is None else 100 * late, 3):>7} "
+                f"{_fmt(None if plate is None else 100 * plate, 3):>7} {_fmt(jit.get('p99')):>8} "
+                f"{sum(drops) if drops else 'n/a':>8} {_fmt(r.get('cpu_cores_total'), 2):>5} "
+                f"{_fmt(r.get('other_cpu_cores'), 2):>6}")
+            lines.append('            CPU per process (cores): ' + ', '.join(
+                f'{k} {_fmt(v, 2)}' for k, v in r.get('cpu_cores', {}).items())
+                + f"; load {r.get('loadavg_before')}")
+    if res['lockstep']:
+        lines.append('lockstep (simulated s per wall s; CPU s per simulated s, all processes):')
+        for r in res['lockstep']:
+            lines.append(f"  {r['layout']:<9} h={r['h_s'] * 1e3:g} ms  recorder "
+                         f"{'yes' if r['recorder'] else 'no ':<3}  {_fmt(r['simulated_s'], 1)} s in "
+                         f"{_fmt(r['wall_s'], 2)} s = {_fmt(r['sim_per_wall'], 2)}x real time, CPU "
+                         f"{_fmt(r.get('cpu_s_per_simulated_s'), 2)} s/s; load {r.get('loadavg_before')}")
+    d = res.get('decode')
+    if d:
+        lines.append(f"bag decode: {d['messages']} messages, read {_fmt(d.get('read_s'), 3)} s, decode "
+                     f"{_fmt(d.get('decode_s'), 3)} s = {_fmt(d.get('msgs_per_s'))} msg/s decode, "
+                     f"{_fmt(d.get('read_and_decode_msgs_per_s'))} msg/s read+decode")
+    return '\n'.join(lines)
+
+
+# ------------------------------------------------------------------ main
+def _parser() -> argparse.ArgumentParser:
+    from .cli import Parser
+    p = Parser(prog='rwpend bench', description='Real-time (1 kHz and 2 kHz), lockstep and bag '
+               'decode benchmark of the full stack; prints a summary and writes OUTDIR/bench.json. '
+               'Timing figures depend on the load of the machine: the JSON records the load average '
+               'and the CPU used by every other process during each run.')
+    p.add_argument('--duration', type=float, default=None,
+                   help='wall seconds of each real-time run (default 60; 8 with --quick)')
+    p.add_argument('--quick', action='store_true', help='short runs (8 s real time, 4 s lockstep)')
+    p.add_argument('-o', '--out', default=None, help='output directory (default bench_out/)')
+    p.add_argument('--h', type=float, action='append', default=None, metavar='S',
+                   help='sample period(s) to run (repeatable; default 0.001 and 0.0005)')
+    p.add_argument('--layout', choices=('separate', 'composed', 'both'), default='both',
+                   help='separate processes, one composed process, or both (default)')
+    p.add_argument('--lockstep-duration', type=float, default=None,
+                   help='simulated seconds of each lockstep run (default 12; 4 with --quick)')
+    p.add_argument('--no-realtime', action='store_true', help='skip the real-time runs')
+    p.add_argument('--no-lockstep', action='store_true', help='skip the lockstep runs')
+    p.add_argument('--no-decode', action='store_true', help='skip the bag decode benchmark')
+    p.add_argument('--domain-id', type=int, default=None,
+                   help='ROS_DOMAIN_ID of the runs (default: the environment\'s, else 60)')
+    p.add_argument('--ns', default='/bench', help='namespace of the benchmarked rig (default /bench)')
+    p.add_argument('--keep-bags', action='store_true', help='keep the bags (default: delete them '
+                   'after the metrics are taken)')
+    p.add_argument('-v', '--verbose', action='store_true', help="show the nodes' output")
+    p.add_argument('--rt-priority', type=int, default=50, metavar='N',
+                   help='./rwpend up --rt-priority of the runs (default 50; 0 = ordinary scheduling)')
+    p.add_argument('--json', action='store_true', help='print the JSON instead of the summary')
+    return p
+
+
+def main(argv=None) -> int:
+    p = _parser()
+    a = p.parse_args(sys.argv[1:] if argv is None else list(argv))
+    from .cli import ROOT
+    duration = a.duration if a.duration is not None else (8.0 if a.quick else 60.0)
+    ls_dur = a.lockstep_duration if a.lockstep_duration is not None else (4.0 if a.quick else 12.0)
+    if not (duration > 0 and ls_dur > 0):
+        print('rwpend bench: error: durations must be > 0', file=sys.stderr)
+        return 2
+    periods = tuple(a.h) if a.h else DEFAULT_PERIODS
+    if any(not (1e-5 <= h <= 0.1) for h in periods):
+        print('rwpend bench: error: --h must be in [1e-5, 0.1] s', file=sys.stderr)
+        return 2
+    layouts = ('separate', 'composed') if a.layout == 'both' else (a.layout,)
+    out = Path(a.out) if a.out else ROOT / 'bench_out'
+    out.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ)
+    if a.domain_id is not None:
+        env['ROS_DOMAIN_ID'] = str(a.domain_id)
+    env.setdefault('ROS_DOMAIN_ID', '60')
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env['PYTHONUNBUFFERED'] = '1'
+    echo = sys.stderr if a.verbose else None
+    if not 0 <= a.rt_priority <= 99:
+        print('rwpend bench: error: --rt-priority must be in 0..99', file=sys.stderr)
+        return 2
+    up_extra = ['--rt-priority', str(a.rt_priority)]
+    res = {'started': time.time(), 'machine': machine_info(),
+           'settings': {'duration_s': duration, 'lockstep_duration_s': ls_dur, 'periods_s': list(periods),
+                        'layouts': list(layouts), 'domain_id': int(env['ROS_DOMAIN_ID']),
+                        'namespace': a.ns, 'quick': a.quick, 'rt_priority': a.rt_priority,
+                        'command': 'rwpend bench ' + ' '.join(sys.argv[1:] if argv is None else argv)},
+           'realtime': [], 'lockstep': [], 'decode': None}
+    say = (lambda s: print(s, file=sys.stderr, flush=True))
+    try:
+        if not a.no_realtime:
+            for layout in layouts:
+                for h in periods:
+                    say(f'rwpend bench: real time, {layout}, h = {h * 1e3:g} ms, {duration:g} s ...')
+                    r = run_realtime(out, h, duration, layout, env, a.ns, echo, up_extra=up_extra)
+                    res['realtime'].append(r)
+        if not a.no_lockstep:
+            for layout in layouts:
+                for record in (False, True):
+                    say(f'rwpend bench: lockstep, {layout}, {ls_dur:g} s simulated, '
+                        f'recorder {"on" if record else "off"} ...')
+                    res['lockstep'].append(run_lockstep(out, periods[0], ls_dur, layout, record, env,
+                                                        a.ns, echo, up_extra=up_extra))
+        if not a.no_decode:
+            bags = [Path(r['bag']) for r in res['realtime'] + res['lockstep']
+                    if r.get('bag') and Path(r['bag']).is_dir()]
+            if bags:
+                biggest = max(bags, key=lambda b: sum(f.stat().st_size for f in b.iterdir()))
+                say(f'rwpend bench: decoding {biggest} ...')
+                res['decode'] = run_decode(biggest)
+    except KeyboardInterrupt:
+        res['interrupted'] = True
+    finally:
+        res['machine']['loadavg_end'] = _loadavg()
+        res['finished'] = time.time()
+        if not a.keep_bags:
+            for r in res['realtime'] + res['lockstep']:
+                if r.get('bag') and Path(r['bag']).is_dir():
+                    shutil.rmtree(r['bag'], ignore_errors=True)
+        (out / 'bench.json').write_text(json.dumps(res, indent=2) + '\n', encoding='utf-8')
+    if a.json:
+        print(json.dumps(res, indent=2))
+    else:
+        print(summary_text(res))
+        print(f'written: {out / "bench.json"}')
+    return 130 if res.get('interrupted') else 0

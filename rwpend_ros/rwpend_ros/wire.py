@@ -1,0 +1,146 @@
+"""The control path's messages as CDR wire bytes, for raw subscriptions and raw publishing.
+
+Taking a message as a Python object costs rclpy a constructor call per nested message (e.g.
+EncoderCounts -> Header -> Time) and a ``getattr`` by name per field; publishing one costs the
+reverse. With ``create_subscription(..., raw=True)`` and ``publisher.publish(bytes)`` the
+per-sample path does a ``struct.unpack_from`` / ``pack_into`` instead: measured on the project's
+2-core machine, one in-process StateEstimate delivery (publish + take + callback) costs
+23 us of CPU as objects and 8 us as bytes (PERFORMANCE.md).
+
+Layout: XCDR1, little endian (what rmw_fastrtps puts on the wire): a 4-byte encapsulation
+header, then the fields, each aligned to its size (8 at most) counted from the end of the
+encapsulation header; a string is a uint32 length (NUL included), the bytes and the NUL.
+The header of an incoming sample is kept as its wire bytes and copied into the messages that
+carry it on (state, joint_states), so frame_id is never decoded.
+
+Pure Python (struct), no rclpy: tested against rclpy's serializer in the unit tests.
+"""
+from __future__ import annotations
+
+import struct
+
+ENCAPSULATION = b'\x00\x01\x00\x00'   # CDR little endian, no options
+
+_HEAD = struct.Struct('<iII')          # stamp.sec, stamp.nanosec, frame_id length
+_ENC_TAIL = struct.Struct('<Qii')      # seq, pendulum_counts, motor_counts
+_CMD_TAIL = struct.Struct('<Qd')       # seq, u
+_STATE_TAIL = struct.Struct('<Q6dI')   # seq, theta ... energy, estimator length
+_U32 = struct.Struct('<I')
+_2D = struct.Struct('<2d')
+
+
+def _pad8(n: int) -> int:
+    return (-n) % 8
+
+
+def _pad4(n: int) -> int:
+    return (-n) % 4
+
+
+def header_end(data: bytes) -> int:
+    """Offset (in ``data``, encapsulation included) just after the std_msgs/Header."""
+    return 4 + 12 + _HEAD.unpack_from(data, 4)[2]
+
+
+def header_bytes(data: bytes) -> bytes:
+    """The wire bytes of the std_msgs/Header at the start of a message (no encapsulation)."""
+    return bytes(data[4:header_end(data)])
+
+
+def pack_header(sec: int, nanosec: int, frame_id: str) -> bytes:
+    """A std_msgs/Header as wire bytes (no encapsulation)."""
+    f = frame_id.encode() + b'\x00'
+    return _HEAD.pack(sec, nanosec, len(f)) + f
+
+
+def header_stamp(header: bytes) -> tuple[int, int]:
+    sec, nanosec, _ = _HEAD.unpack_from(header, 0)
+    return sec, nanosec
+
+
+def header_frame_id(header: bytes) -> str:
+    n = _HEAD.unpack_from(header, 0)[2]
+    return header[12:12 + n - 1].decode(errors='replace')
+
+
+def _after_header(data: bytes) -> int:
+    """Offset of the first field after the header when that field is 8-aligned."""
+    end = header_end(data) - 4
+    return 4 + end + _pad8(end)
+
+
+def unpack_encoders(data: bytes) -> tuple[bytes, int, int, int]:
+    """rwpend_msgs/EncoderCounts -> (header bytes, seq, pendulum_counts, motor_counts)."""
+    end = header_end(data)
+    rel = end - 4
+    seq, pc, mc = _ENC_TAIL.unpack_from(data, end + _pad8(rel))
+    return bytes(data[4:end]), seq, pc, mc
+
+
+def unpack_command(data: bytes) -> tuple[int, float]:
+    """rwpend_msgs/MotorCommand -> (seq, u) (the header is not needed by its readers)."""
+    return _CMD_TAIL.unpack_from(data, _after_header(data))
+
+
+def pack_encoders(header: bytes, seq: int, pendulum_counts: int, motor_counts: int) -> bytes:
+    return (ENCAPSULATION + header + bytes(_pad8(len(header)))
+            + _ENC_TAIL.pack(seq, pendulum_counts, motor_counts))
+
+
+def pack_command(header: bytes, seq: int, u: float) -> bytes:
+    return ENCAPSULATION + header + bytes(_pad8(len(header))) + _CMD_TAIL.pack(seq, u)
+
+
+class StatePacker:
+    """rwpend_msgs/StateEstimate as wire bytes; the estimator's name is encoded once."""
+
+    def __init__(self, estimator: str = '') -> None:
+        self.set_estimator(estimator)
+
+    def set_estimator(self, estimator: str) -> None:
+        self.estimator = estimator
+        self._name = estimator.encode() + b'\x00'
+
+    def pack(self, header: bytes, seq: int, theta: float, theta_dot: float, wheel_angle: float,
+             wheel_rate: float, friction: float, energy: float) -> bytes:
+        return b''.join((ENCAPSULATION, header, bytes(_pad8(len(header))),
+                         _STATE_TAIL.pack(seq, theta, theta_dot, wheel_angle, wheel_rate, friction,
+                                          energy, len(self._name)),
+                         self._name))
+
+
+class JointStatePacker:
+    """sensor_msgs/JointState with fixed joint names, 2 positions, 2 velocities, no effort."""
+
+    def __init__(self, names: tuple[str, ...] = ('pendulum', 'wheel')) -> None:
+        if len(names) != 2:
+            raise ValueError('two joints')
+        self.names = tuple(names)
+        parts = [_U32.pack(len(names))]
+        off = 4                                     # relative to the start of the names sequence
+        for n in names:
+            b = n.encode() + b'\x00'
+            pad = _pad4(off)
+            parts += [bytes(pad), _U32.pack(len(b)), b]
+            off += pad + 4 + len(b)
+        self._names = b''.join(parts)
+        self._names_len = off
+
+    def pack(self, header: bytes, p0: float, p1: float, v0: float, v1: float) -> bytes:
+        rel = len(header)                           # payload offset after the header
+        out = [ENCAPSULATION, header]
+        pad = _pad4(rel)
+        out.append(bytes(pad))
+        rel += pad
+        out.append(self._names)
+        rel += self._names_len
+        for a, b in ((p0, p1), (v0, v1)):
+            pad = _pad4(rel)
+            out += [bytes(pad), _U32.pack(2)]
+            rel += pad + 4
+            pad = _pad8(rel)
+            out += [bytes(pad), _2D.pack(a, b)]
+            rel += pad + 16
+        pad = _pad4(rel)
+        out += [bytes(pad), _U32.pack(0)]           # effort: empty
+        return b''.join(out)

@@ -1,0 +1,53 @@
+"""``./rwpend bench`` runs end to end and writes its JSON (a tiny run: no timing is asserted --
+timing goals are never pass/fail, the figures depend on the machine and its load)."""
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+RWPEND = str(ROOT / 'rwpend')
+
+
+@pytest.mark.timeout(150)
+def test_bench_runs_and_writes_json(tmp_path, ros_env):
+    out = tmp_path / 'bench'
+    p = subprocess.run([RWPEND, 'bench', '--duration', '2', '--lockstep-duration', '1', '--h', '0.001',
+                        '--layout', 'separate', '-o', str(out)], env=ros_env, capture_output=True,
+                       text=True, timeout=140)
+    assert p.returncode == 0, f'{p.stdout[-3000:]}\n{p.stderr[-3000:]}'
+    assert 'real time' in p.stdout and 'lockstep' in p.stdout and 'bag decode' in p.stdout, p.stdout
+    res = json.loads((out / 'bench.json').read_text())
+    for key in ('started', 'finished', 'machine', 'settings', 'realtime', 'lockstep', 'decode'):
+        assert key in res, key
+    for key in ('cpus', 'cpu_model', 'python', 'rmw', 'executor', 'loadavg_start', 'loadavg_end'):
+        assert key in res['machine'], key
+    assert res['settings']['periods_s'] == [0.001] and res['settings']['layouts'] == ['separate']
+
+    assert len(res['realtime']) == 1
+    rt = res['realtime'][0]
+    for key in ('layout', 'h_s', 'rate_hz', 'samples', 'latency_us', 'late_fraction',
+                'plant_late_fraction', 'jitter_us', 'period_us', 'dropped', 'cpu_cores',
+                'cpu_cores_total', 'other_cpu_cores', 'loadavg_before', 'exit_codes'):
+        assert key in rt, key
+    assert rt['samples'] > 0 and rt['rate_hz'] == 1000
+    for key in ('p50', 'p99', 'p99.9', 'max'):
+        assert key in rt['latency_us'], key
+    assert set(rt['cpu_cores']) == {'sim', 'estimator', 'controller', 'recorder'}
+    assert set(rt['dropped']) >= {'/bench/encoders', '/bench/command'}
+    assert all(c in (0, -2, 130) for c in rt['exit_codes'].values()), rt['exit_codes']
+
+    assert [r['recorder'] for r in res['lockstep']] == [False, True]
+    for r in res['lockstep']:
+        for key in ('simulated_s', 'wall_s', 'sim_per_wall', 'cpu_s_per_simulated_s'):
+            assert r.get(key) is not None, (key, r)
+        assert r['simulated_s'] == pytest.approx(1.0, abs=1e-6)
+
+    d = res['decode']
+    assert d['messages'] > 0 and d['msgs_per_s'] > 0
+    # bags are deleted unless --keep-bags; logs stay
+    assert not any(x.is_dir() for x in out.iterdir()), sorted(out.iterdir())
+    assert list(out.glob('*.log'))

@@ -1,0 +1,798 @@
+"""System tests of issue 7 (safety and fault tolerance): real node processes, DDS on localhost.
+
+Each test starts the nodes it needs as separate processes (``./rwpend node ...``, the recorder,
+helper nodes written below), injects one fault, and checks the record (bag) or the helpers'
+counts.  Every test prints a ``measured:`` line with its figures (fault -> zero torque in
+samples and ms, fuzz counts, loss/delay survived).
+
+* dead controller (SIGKILL mid-balance) -> the plant applies u = 0 at once, /diagnostics of the
+  simulator says "command timeout"; a restarted controller (auto) swings up and catches again;
+* dead estimator -> the controller reports "stale state" and commands 0; a restarted estimator
+  recovers the loop;
+* a relay dropping 10 % of ``state`` (lockstep: balance must hold), and one delaying it by 5 ms
+  and dropping 10 % in real time (balance holds or fails safe): never |u| > 10 or NaN;
+* fuzz: >= 10 000 random messages into every subscriber and random requests to every service
+  of controller, estimator and simulator: nodes alive, refusals counted, commands bounded;
+* e-stop raised / cleared with ``./rwpend estop``: u = 0 on the plant whatever the controller
+  sends, on the simulator and through the serial driver (emulator).
+
+Lockstep runs use ``lockstep_timeout`` = 5 ms, so a dead loop costs 5 ms of wall time per
+simulated sample (the pendulum can fall in a few seconds) instead of 0.5 s.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rwpend_bag.analysis import _decode
+from rwpend_bag.reader import read_bag
+from rwpend_bringup.launch import NodeSpec, overrides_yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+RWPEND = str(ROOT / 'rwpend')
+PY = str(ROOT / '.venv' / 'bin' / 'python') if (ROOT / '.venv' / 'bin' / 'python').exists() else sys.executable
+H = 0.001
+NS = '/rwpend'
+LOCKSTEP_TIMEOUT = 0.005
+
+
+# ---------------------------------------------------------------------------------- helpers
+class Procs:
+    """Processes of one test: started with logs in files, stopped by pid in a given order."""
+
+    def __init__(self, tmp: Path, env: dict) -> None:
+        self.tmp, self.env = tmp, env
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.logs: dict[str, Path] = {}
+        self.n = 0
+
+    def start(self, tag: str, argv: list[str]) -> subprocess.Popen:
+        log = self.tmp / f'{tag}.log'
+        self.logs[tag] = log
+        p = subprocess.Popen(argv, env=self.env, stdout=open(log, 'w'), stderr=subprocess.STDOUT,
+                             stdin=subprocess.DEVNULL, start_new_session=True)
+        self.procs[tag] = p
+        return p
+
+    def node(self, tag: str, name: str, params: dict, ros: tuple = ()) -> subprocess.Popen:
+        """``./rwpend node NAME`` with ``params`` in a last params file (wins over stack.yaml)."""
+        self.n += 1
+        pf = self.tmp / f'{tag}_{self.n}.yaml'
+        pf.write_text(overrides_yaml(NodeSpec(name, '', params)))
+        return self.start(tag, [RWPEND, 'node', name, '--ros-args', '--params-file', str(pf), *ros])
+
+    def log(self, tag: str) -> str:
+        return self.logs[tag].read_text(errors='replace')
+
+    def wait_log(self, tag: str, text: str, timeout: float) -> None:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if text in self.log(tag):
+                return
+            p = self.procs[tag]
+            assert p.poll() is None, f'{tag} exited ({p.returncode}):\n{self.log(tag)[-3000:]}'
+            time.sleep(0.05)
+        raise AssertionError(f'{text!r} not in the log of {tag} within {timeout} s:\n{self.log(tag)[-3000:]}')
+
+    def kill(self, tag: str) -> int:
+        """SIGKILL (a crash); returns the wall time of the kill (ns)."""
+        p = self.procs[tag]
+        t = time.time_ns()
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=10)
+        return t
+
+    def stop(self, tag: str, timeout: float = 15.0) -> int | None:
+        p = self.procs.get(tag)
+        if p is None or p.poll() is not None:
+            return None if p is None else p.returncode
+        p.send_signal(signal.SIGINT)
+        try:
+            return p.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGKILL)
+            return p.wait(timeout=5)
+
+    def stop_all(self, order: list[str]) -> None:
+        for tag in order + [t for t in self.procs if t not in order]:
+            self.stop(tag)
+
+
+def rwpend(args, env, timeout=60, check=True):
+    p = subprocess.run([RWPEND, *args], env=env, capture_output=True, text=True, timeout=timeout)
+    if check and p.returncode != 0:
+        raise AssertionError(f'./rwpend {" ".join(args)} -> {p.returncode}\n{p.stdout[-2000:]}\n{p.stderr[-2000:]}')
+    return p
+
+
+def series(bag_dir, topic):
+    bag = read_bag(bag_dir)
+    assert topic in bag.topics, sorted(bag.topics)
+    return _decode(bag, topic)
+
+
+def strings(bag_dir, topic, field_names):
+    """String fields of every message of ``topic`` (decoded one by one) and the log times."""
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+    t = read_bag(bag_dir).topics[topic]
+    dec = DecoderFactory().decoder_for('cdr', Schema(id=1, name=t.type, encoding='ros2msg', data=t.schema.encode()))
+    out = []
+    for log_ns, d in zip(t.log_ns(), t.datas):
+        m = dec(d)
+        out.append((int(log_ns), *(getattr(m, f) for f in field_names)))
+    return out
+
+
+def diagnostics(bag_dir):
+    """[(log_ns, name, level, message, {key: value})] of /diagnostics in a bag."""
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+    t = read_bag(bag_dir).topics['/diagnostics']
+    dec = DecoderFactory().decoder_for('cdr', Schema(id=1, name=t.type, encoding='ros2msg', data=t.schema.encode()))
+    out = []
+    for log_ns, d in zip(t.log_ns(), t.datas):
+        for s in dec(d).status:
+            level = s.level[0] if isinstance(s.level, (bytes, bytearray)) else int(s.level)
+            out.append((int(log_ns), s.name, level, s.message, {kv.key: kv.value for kv in s.values}))
+    return out
+
+
+def deviation(theta):
+    return np.remainder(np.asarray(theta) - np.pi + np.pi, 2 * np.pi) - np.pi
+
+
+def longest_run(mask) -> int:
+    best = run = 0
+    for m in mask:
+        run = run + 1 if m else 0
+        best = max(best, run)
+    return best
+
+
+def assert_commands_sane(bag, topic=NS + '/command'):
+    cmd = series(bag, topic)
+    u = cmd['u']
+    assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= 10.0), 'a command outside |u| <= 10 or not finite'
+    truth = series(bag, NS + '/sim/true_state')
+    assert np.all(np.isfinite(truth['u_applied'])) and np.all(np.abs(truth['u_applied']) <= 10.0)
+    return cmd, truth
+
+
+def no_tracebacks(procs: Procs, tags) -> None:
+    for tag in tags:
+        text = procs.log(tag)
+        assert 'Traceback' not in text, f'{tag}:\n{text[-3000:]}'
+
+
+def loop_params(lockstep: bool, **sim):
+    """Params of sim / estimator / controller for a loop recorded by a separate recorder."""
+    s = {'start.encoders_subscribers': 2, 'start.true_state_subscribers': 1}
+    e, c = {}, {}
+    if lockstep:
+        s.update({'lockstep': True, 'lockstep_timeout': LOCKSTEP_TIMEOUT})
+        e['use_sim_time'] = True
+        c['use_sim_time'] = True
+    s.update(sim)
+    return s, e, c
+
+
+UPRIGHT = math.pi + 0.05   # start near upright: auto catches at once (saves the first swing-up)
+
+
+# ------------------------------------------------------------------ 1. dead controller
+@pytest.mark.timeout(120)
+def test_dead_controller_plant_zeroes_and_restart_swings_up_again(tmp_path, ros_env):
+    bag = tmp_path / 'bag'
+    P = Procs(tmp_path, ros_env)
+    sim, est, ctl = loop_params(True, **{'initial.theta': UPRIGHT})
+    try:
+        P.start('recorder', [RWPEND, 'record', '-o', str(bag), '--all'])
+        P.node('sim', 'sim', sim)
+        P.node('estimator', 'estimator', est)
+        P.node('ctl1', 'controller', {**ctl, 'mode': 'auto'})
+        P.wait_log('ctl1', 'auto/catch', 60)
+        time.sleep(2.0)                                  # balancing
+        kill_ns = P.kill('ctl1')
+        rwpend(['tap', '1.5'], ros_env)                  # push it over while nobody controls it
+        time.sleep(2.0)
+        restart_ns = time.time_ns()
+        P.node('ctl2', 'controller', {**ctl, 'mode': 'auto'})
+        P.wait_log('ctl2', 'auto/catch', 60)
+        time.sleep(4.0)
+    finally:
+        P.stop_all(['ctl2', 'estimator', 'sim', 'recorder'])
+    no_tracebacks(P, ['sim', 'estimator', 'ctl2'])
+    cmd, truth = assert_commands_sane(bag)
+    m = {}
+    # the dead controller's last command answered seq s1; the plant's zero starts at s1 + n
+    s1 = int(cmd['seq'][cmd['_log_ns'] < kill_ns + 500_000_000].max())
+    seq = truth['seq'].astype(np.int64)
+    after = seq > s1 + 1
+    # true_state k shows the command held over [t_k-1, t_k): zero from sample s1 + n
+    j = np.nonzero(after & (truth['u_commanded'] == 0.0))[0][0]
+    m['controller_kill_to_zero_samples'] = int(seq[j] - 1 - s1)
+    m['controller_kill_to_zero_ms_sim'] = m['controller_kill_to_zero_samples'] * H * 1e3
+    m['controller_kill_to_zero_ms_wall'] = round((int(truth['_log_ns'][j]) - kill_ns) / 1e6, 1)
+    jj = np.nonzero(after & (np.abs(truth['u_applied']) < 0.05))[0][0]
+    m['controller_kill_to_motor_torque_below_0.05_samples'] = int(seq[jj] - 1 - s1)
+    assert m['controller_kill_to_zero_samples'] <= 3, m
+    assert np.all(truth['u_commanded'][after & (truth['_log_ns'] < restart_ns)] == 0.0)
+    # /diagnostics of the simulator says why
+    diag = [d for d in diagnostics(bag) if d[1].endswith('sim: plant') and d[0] > kill_ns - 10_000_000]
+    why = next(d for d in diag if 'command timeout' in d[3])
+    m['sim_diagnostics_after_kill_ms_wall'] = round((why[0] - kill_ns) / 1e6, 1)
+    assert why[0] - kill_ns < 2e9, m
+    # the pendulum fell, and the restarted controller swung it up and caught it again
+    x = deviation(truth['theta'])
+    dead = (truth['_log_ns'] > kill_ns) & (truth['_log_ns'] < restart_ns)
+    assert np.max(np.abs(x[dead])) > 1.0
+    st = strings(bag, NS + '/controller/status', ['law', 'fault'])
+    laws2 = [s[1] for s in st if s[0] > restart_ns]
+    assert 'swingup' in laws2 and 'catch' in laws2, laws2[:20]
+    m['balanced_after_restart_samples'] = longest_run(np.abs(x[truth['_log_ns'] > restart_ns]) < 0.1)
+    print('measured:', json.dumps(m))
+    assert m['balanced_after_restart_samples'] > 1000, (m, laws2)
+
+
+# ------------------------------------------------------------------ 2. dead estimator
+@pytest.mark.timeout(120)
+def test_dead_estimator_controller_reports_stale_and_zeroes(tmp_path, ros_env):
+    bag = tmp_path / 'bag'
+    P = Procs(tmp_path, ros_env)
+    sim, est, ctl = loop_params(True, **{'initial.theta': UPRIGHT})
+    try:
+        P.start('recorder', [RWPEND, 'record', '-o', str(bag), '--all'])
+        P.node('sim', 'sim', sim)
+        P.node('est1', 'estimator', est)
+        P.node('controller', 'controller', {**ctl, 'mode': 'auto'})
+        P.wait_log('controller', 'auto/catch', 60)
+        time.sleep(1.5)
+        kill_ns = P.kill('est1')
+        P.wait_log('controller', 'stale state', 20)
+        time.sleep(1.0)
+        restart_ns = time.time_ns()
+        P.node('est2', 'estimator', est)
+        P.wait_log('controller', 'state resumed', 30)
+        time.sleep(2.0)
+    finally:
+        P.stop_all(['controller', 'est2', 'sim', 'recorder'])
+    no_tracebacks(P, ['sim', 'controller', 'est2'])
+    cmd, truth = assert_commands_sane(bag)
+    m = {}
+    state = series(bag, NS + '/state')
+    before = state['_log_ns'] < kill_ns + 300_000_000
+    s_last = int(state['seq'][before].max())
+    t_last = int(state['_stamp_ns'][before][np.argmax(state['seq'][before])])
+    st = series(bag, NS + '/controller/status')
+    faults = strings(bag, NS + '/controller/status', ['fault', 'seq'])
+    i = next(k for k, f in enumerate(faults) if f[1].startswith('stale state') and f[0] > kill_ns - 100_000_000)
+    assert faults[i][2] == s_last + 1, (faults[i], s_last)
+    m['estimator_kill_to_stale_ms_sim'] = round((int(st['_stamp_ns'][i]) - t_last) / 1e6, 3)
+    m['estimator_kill_to_stale_samples'] = round(m['estimator_kill_to_stale_ms_sim'] / (H * 1e3))
+    m['estimator_kill_to_stale_ms_wall'] = round((faults[i][0] - kill_ns) / 1e6, 1)
+    assert 3 <= m['estimator_kill_to_stale_samples'] <= 6, m
+    # the zero command answering the next sample, applied by the plant
+    zero = (cmd['seq'] == s_last + 1) & (cmd['u'] == 0.0)
+    assert zero.any(), 'no zero command after the state went stale'
+    seq = truth['seq'].astype(np.int64)
+    j = np.nonzero((seq > s_last + 1) & (truth['u_commanded'] == 0.0))[0][0]
+    m['estimator_kill_to_plant_zero_samples'] = int(seq[j] - 1 - s_last)
+    assert m['estimator_kill_to_plant_zero_samples'] <= 3
+    # reported on /diagnostics with the reason
+    diag = [d for d in diagnostics(bag) if d[1].endswith('/controller') and d[0] > kill_ns]
+    assert any(d[2] == 2 and d[3].startswith('stale state') for d in diag), diag[:5]
+    # recovery: fault cleared, commands flow again
+    assert any(f[1] == '' for f in faults[i:] if f[0] > restart_ns)
+    assert (cmd['seq'] > s_last + 1).any() and (cmd['_log_ns'] > restart_ns).sum() > 500
+    print('measured:', json.dumps(m))
+
+
+# ------------------------------------------------------------------ 3. loss and delay
+RELAY = textwrap.dedent('''
+    import collections, json, random, sys, threading, time
+    import rclpy
+    from rclpy.node import Node
+    from rwpend_msgs.msg import StateEstimate
+    from rwpend_ros.common import QOS_CONTROL, make_executor, spin_executor
+    out, drop, delay, seed = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
+    rclpy.init()
+    node = Node('relay', namespace='/rwpend')
+    pub = node.create_publisher(StateEstimate, 'state_relayed', QOS_CONTROL)
+    rnd = random.Random(seed)
+    n = {'in': 0, 'dropped': 0, 'out': 0}
+    q = collections.deque()
+    cv = threading.Condition()
+    stop = threading.Event()
+    def on_state(m):
+        n['in'] += 1
+        if rnd.random() < drop:
+            n['dropped'] += 1
+            return
+        if delay <= 0:
+            pub.publish(m)
+            n['out'] += 1
+            return
+        with cv:
+            q.append((time.monotonic() + delay, m))
+            cv.notify()
+    def delayer():
+        while not stop.is_set():
+            with cv:
+                while not q and not stop.is_set():
+                    cv.wait(0.1)
+                if stop.is_set():
+                    return
+                due, m = q[0]
+            wait = due - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            with cv:
+                q.popleft()
+            pub.publish(m)
+            n['out'] += 1
+    node.create_subscription(StateEstimate, 'state', on_state, QOS_CONTROL)
+    threading.Thread(target=delayer, daemon=True).start()
+    ex = make_executor()
+    ex.add_node(node)
+    print('relay ready', flush=True)
+    try:
+        spin_executor(ex)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        stop.set()
+        json.dump(n, open(out, 'w'))
+''')
+
+
+def relay_run(tmp_path, env, lockstep, drop, delay, duration):
+    bag = tmp_path / 'bag'
+    P = Procs(tmp_path, env)
+    sim, est, ctl = loop_params(lockstep, **{'initial.theta': UPRIGHT, 'duration': duration})
+    counts = tmp_path / 'relay.json'
+    try:
+        P.start('recorder', [RWPEND, 'record', '-o', str(bag), '--all'])
+        P.start('relay', [PY, '-u', '-c', RELAY, str(counts), str(drop), str(delay), '11'])
+        P.node('estimator', 'estimator', est)
+        P.node('controller', 'controller', {**ctl, 'mode': 'auto'}, ros=('-r', 'state:=state_relayed'))
+        P.wait_log('relay', 'relay ready', 30)
+        P.node('sim', 'sim', sim)
+        end = time.monotonic() + 25 + (2 * duration if lockstep else duration)
+        while P.procs['sim'].poll() is None and time.monotonic() < end:   # the sim stops at duration
+            time.sleep(0.2)
+        assert P.procs['sim'].poll() == 0, P.log('sim')[-2000:]
+        for tag in ('controller', 'estimator', 'relay'):
+            assert P.procs[tag].poll() is None, f'{tag} died:\n{P.log(tag)[-2000:]}'
+    finally:
+        P.stop_all(['controller', 'relay', 'estimator', 'sim', 'recorder'])
+    no_tracebacks(P, ['controller', 'estimator', 'relay', 'sim'])
+    cmd, truth = assert_commands_sane(bag)
+    n = json.loads(counts.read_text())
+    x = deviation(truth['theta'])
+    t = truth['seq'] * H
+    ctl_diag = [d for d in diagnostics(bag) if d[1].endswith('/controller')]
+    m = {'relay_in': n['in'], 'relay_dropped': n['dropped'], 'drop_fraction': round(n['dropped'] / max(n['in'], 1), 4),
+         'delay_ms': delay * 1e3, 'samples': int(len(t)), 'commands': int(len(cmd['u'])),
+         'max_abs_u': float(np.max(np.abs(cmd['u']))),
+         'balanced_fraction_after_1s': float(np.mean(np.abs(x[t > 1.0]) < 0.1)),
+         'max_abs_deviation_after_1s': float(np.max(np.abs(x[t > 1.0]))),
+         'controller_stale_episodes': int(ctl_diag[-1][4].get('stale_episodes', -1)) if ctl_diag else None}
+    return m, truth, cmd
+
+
+@pytest.mark.timeout(150)
+def test_lockstep_relay_dropping_10_percent_of_state_balance_holds(tmp_path, ros_env):
+    m, truth, cmd = relay_run(tmp_path, ros_env, lockstep=True, drop=0.10, delay=0.0, duration=6.0)
+    print('measured:', json.dumps(m))
+    assert 0.07 < m['drop_fraction'] < 0.13 and m['relay_in'] > 5000
+    assert m['balanced_fraction_after_1s'] == 1.0, m     # every sample within 0.1 rad of upright
+
+
+@pytest.mark.timeout(150)
+def test_realtime_relay_delay_5ms_and_drops_balance_holds_or_fails_safe(tmp_path, ros_env):
+    """Real time on a shared machine: the loop may lose the pendulum (reported), but every command
+    stays finite and |u| <= 10, and no node dies."""
+    m, truth, cmd = relay_run(tmp_path, ros_env, lockstep=False, drop=0.10, delay=0.005, duration=6.0)
+    m['balance_held'] = m['balanced_fraction_after_1s'] == 1.0
+    print('measured:', json.dumps(m))
+    assert m['relay_in'] > 1000
+
+
+# ------------------------------------------------------------------ 4. fuzz
+FUZZER = textwrap.dedent('''
+    import json, math, random, sys, time
+    import rclpy
+    from rclpy.node import Node
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rcl_interfaces.msg import Parameter as PMsg, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    from std_srvs.srv import SetBool, Trigger
+    from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState, StateEstimate
+    from rwpend_msgs.srv import Disturb, SetMode
+    from rwpend_ros.common import QOS_CONTROL, QOS_STATUS
+    out, n_msgs, n_srv, seed = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+    rnd = random.Random(seed)
+    rclpy.init()
+    node = Node('fuzzer')
+    SPECIAL = [math.nan, math.inf, -math.inf, 1e308, -1e308, 1e12, -1e12, 0.0, -0.0, 5e-324, -1.0, 1e-300]
+    def f():
+        r = rnd.random()
+        return rnd.choice(SPECIAL) if r < 0.35 else (rnd.uniform(-1e4, 1e4) if r < 0.6 else rnd.gauss(0, 3))
+    def i32():
+        return rnd.choice([0, -1, 1, 2**31 - 1, -2**31, rnd.randint(-2**31, 2**31 - 1), rnd.randint(-3, 3)])
+    def u64(k):
+        return rnd.choice([k, k, k + 1, 0, 2**64 - 1, rnd.randrange(2**64), max(k - 5, 0)])
+    def stamp(m):
+        if rnd.random() < 0.5:
+            m.header.stamp = node.get_clock().now().to_msg()
+        else:
+            m.header.stamp.sec = rnd.randint(-2**31, 2**31 - 1)
+            m.header.stamp.nanosec = rnd.randint(0, 2**32 - 1)
+    pubs = {
+        'state': node.create_publisher(StateEstimate, '/fz_c/state', QOS_CONTROL),
+        'encoders': node.create_publisher(EncoderCounts, '/fz_e/encoders', QOS_CONTROL),
+        'est_command': node.create_publisher(MotorCommand, '/fz_e/command', QOS_CONTROL),
+        'sim_command': node.create_publisher(MotorCommand, '/fz_s/command', QOS_CONTROL),
+    }
+    seen = {'commands': 0, 'bad_commands': 0, 'states': 0, 'bad_states': 0, 'truth': 0, 'bad_truth': 0}
+    def on_cmd(m):
+        seen['commands'] += 1
+        if not (math.isfinite(m.u) and abs(m.u) <= 10.0):
+            seen['bad_commands'] += 1
+    def on_state(m):
+        seen['states'] += 1
+        if not all(math.isfinite(v) for v in (m.theta, m.theta_dot, m.wheel_angle, m.wheel_rate, m.friction, m.energy)):
+            seen['bad_states'] += 1
+    sim_seq = [0]
+    def on_truth(m):
+        seen['truth'] += 1
+        sim_seq[0] = m.seq
+        if not (math.isfinite(m.u_applied) and abs(m.u_applied) <= 10.0 and math.isfinite(m.u_commanded)
+                and abs(m.u_commanded) <= 10.0):
+            seen['bad_truth'] += 1
+    diags = {}
+    def on_diag(a):
+        for s in a.status:
+            diags[s.name] = (s.message, {kv.key: kv.value for kv in s.values})
+    node.create_subscription(MotorCommand, '/fz_c/command', on_cmd, QOS_CONTROL)
+    node.create_subscription(StateEstimate, '/fz_e/state', on_state, QOS_CONTROL)
+    node.create_subscription(PlantState, '/fz_s/sim/true_state', on_truth, QOS_CONTROL)
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, QOS_STATUS)
+    def spin(s):
+        end = time.monotonic() + s
+        while time.monotonic() < end:
+            rclpy.spin_once(node, timeout_sec=0.005)
+    end = time.monotonic() + 30
+    while time.monotonic() < end and not all(p.get_subscription_count() > 0 for p in pubs.values()):
+        spin(0.1)
+    sent = {k: 0 for k in pubs}
+    t0 = time.monotonic()
+    for k in range(n_msgs):
+        m = StateEstimate(); stamp(m); m.seq = u64(k)
+        m.theta, m.theta_dot, m.wheel_angle, m.wheel_rate, m.friction, m.energy = f(), f(), f(), f(), f(), f()
+        m.estimator = rnd.choice(['', 'x' * 300, 'nonlinear', '\\u00e9\\u4e2d'])
+        pubs['state'].publish(m); sent['state'] += 1
+        e = EncoderCounts(); stamp(e); e.seq = u64(k)
+        wild = k > 10 and rnd.random() < 0.2     # else plausible counts near 0, so estimates come out
+        e.pendulum_counts, e.motor_counts = (i32(), i32()) if wild else (rnd.randint(-3, 3), rnd.randint(-40, 40))
+        pubs['encoders'].publish(e); sent['encoders'] += 1
+        for key in ('est_command', 'sim_command'):
+            c = MotorCommand(); stamp(c); c.u = f()
+            # the simulator accepts answers to its current samples: mostly those, some garbage
+            c.seq = u64(k) if key == 'est_command' or rnd.random() < 0.3 else max(sim_seq[0] - rnd.randrange(3), 0)
+            pubs[key].publish(c); sent[key] += 1
+        if k % 100 == 99:
+            # pace by the controller's and the estimator's answers (out-of-order states get none,
+            # refused encoder samples neither): at most a few hundred messages in flight, far
+            # below the depth of 1000 of the reliable QoS, so every message is delivered
+            end = time.monotonic() + 2.0
+            while time.monotonic() < end and (seen['commands'] < 0.9 * sent['state'] - 300
+                                              or seen['states'] < 0.6 * sent['encoders'] - 300):
+                rclpy.spin_once(node, timeout_sec=0.005)
+            spin(0.002)
+    t_msgs = time.monotonic() - t0
+    print(f'messages sent in {t_msgs:.1f} s', flush=True)
+    # ------------------------------------------------ services
+    def pvalue():
+        pv = ParameterValue()
+        kind = rnd.randrange(6)
+        if kind == 0:
+            pv.type, pv.double_value = ParameterType.PARAMETER_DOUBLE, f()
+        elif kind == 1:
+            pv.type, pv.integer_value = ParameterType.PARAMETER_INTEGER, rnd.choice([0, -1, 3, 2**63 - 1, -2**63])
+        elif kind == 2:
+            pv.type, pv.bool_value = ParameterType.PARAMETER_BOOL, rnd.random() < 0.5
+        elif kind == 3:
+            pv.type, pv.string_value = ParameterType.PARAMETER_STRING, rnd.choice(
+                ['', 'auto', 'balance', 'off', 'brake', 'nonlinear', 'observer3', '1.5wp', 'nan', 'x' * 1000])
+        elif kind == 4:
+            pv.type, pv.double_array_value = ParameterType.PARAMETER_DOUBLE_ARRAY, [f() for _ in range(rnd.randrange(4))]
+        else:
+            pv.type = ParameterType.PARAMETER_NOT_SET
+        return pv
+    CTL = ['mode', 'balance.kpp', 'balance.kdp', 'balance.kdr', 'patch.kpp', 'swingup.c_e', 'theta_s', 'theta_0',
+           'wheel.ref', 'wheel.kp', 'status_every', 'state_timeout_samples', 'wheel_speed_limit',
+           'wheel_speed_action', 'max_saturation_time', 'saturation_action', 'friction_compensation',
+           'balance.design.omega0', 'balance.design.kind', 'swingup.design.k_e', 'rig.g', 'nonexistent', '']
+    EST = ['estimator', 'omega0', 'zeta', 'alpha', 'T', 'pendulum_omega0', 'friction_source', 'theta_offset',
+           'max_rate', 'publish_joint_states', 'diagnostics_period', 'rig.j_p', 'bogus']
+    SIM = ['lockstep', 'duration', 'initial.theta', 'command_timeout_samples', 'rig.g', 'zzz']
+    def set_params_req(names):
+        return SetParameters.Request(parameters=[PMsg(name=rnd.choice(names), value=pvalue())
+                                                 for _ in range(rnd.randint(1, 3))])
+    clients = {
+        'ctl_set_mode': (node.create_client(SetMode, '/fz_c/controller/set_mode'), lambda: SetMode.Request(
+            mode=rnd.choice(['auto', 'balance', 'off', 'swingup', 'wheel_velocity', 'wheel_angle', '', 'AUTO', 'x' * 500]))),
+        'ctl_set_parameters': (node.create_client(SetParameters, '/fz_c/controller/set_parameters'),
+                               lambda: set_params_req(CTL)),
+        'est_set_parameters': (node.create_client(SetParameters, '/fz_e/estimator/set_parameters'),
+                               lambda: set_params_req(EST)),
+        'est_reset': (node.create_client(Trigger, '/fz_e/estimator/reset'), lambda: Trigger.Request()),
+        'sim_disturb': (node.create_client(Disturb, '/fz_s/sim/disturb'), lambda: Disturb.Request(
+            kind=rnd.randrange(256) if rnd.random() < 0.2 else rnd.randrange(2), magnitude=f(), duration=f())),
+        'sim_estop': (node.create_client(SetBool, '/fz_s/sim/estop'), lambda: SetBool.Request(data=rnd.random() < 0.5)),
+        'sim_set_parameters': (node.create_client(SetParameters, '/fz_s/sim/set_parameters'),
+                               lambda: set_params_req(SIM)),
+    }
+    srv = {}
+    t1 = time.monotonic()
+    WINDOW = 8     # outstanding requests (the services' request queues keep the last 10)
+    def tally(done, p):
+        r = p.result()
+        done['answered'] += 1
+        ok = getattr(r, 'success', None)
+        if ok is None and hasattr(r, 'results'):
+            ok = all(x.successful for x in r.results)
+        done['ok' if ok else 'refused'] += 1
+    # all services at once, each with its own window of outstanding requests
+    for name, (cli, make) in clients.items():
+        assert cli.wait_for_service(timeout_sec=20), name
+    srv = {name: {'ok': 0, 'refused': 0, 'answered': 0, 'lost': 0} for name in clients}
+    issued = {name: 0 for name in clients}
+    pending = {name: [] for name in clients}
+    deadline = time.monotonic() + 150
+    while any(issued[n] < n_srv or pending[n] for n in clients) and time.monotonic() < deadline:
+        for name, (cli, make) in clients.items():
+            while issued[name] < n_srv and len(pending[name]) < WINDOW:
+                pending[name].append((time.monotonic(), cli.call_async(make())))
+                issued[name] += 1
+        rclpy.spin_once(node, timeout_sec=0.01)
+        for name, (cli, make) in clients.items():
+            keep = []
+            for t_sent, p in pending[name]:
+                if p.done():
+                    tally(srv[name], p)
+                elif time.monotonic() - t_sent > 10.0:
+                    srv[name]['lost'] += 1
+                    cli.remove_pending_request(p)
+                else:
+                    keep.append((t_sent, p))
+            pending[name] = keep
+    for name in clients:
+        srv[name]['lost'] += len(pending[name]) + (n_srv - issued[name])
+    print(f'services: {srv} after {time.monotonic() - t1:.1f} s', flush=True)
+    # leave the e-stop cleared, then the final word: every node still answers
+    clients['sim_estop'][0].call_async(SetBool.Request(data=False))
+    fut = clients['ctl_set_mode'][0].call_async(SetMode.Request(mode='off'))
+    end = time.monotonic() + 10
+    while not fut.done() and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.01)
+    alive = fut.done() and fut.result().success
+    spin(2.5)   # one more round of /diagnostics
+    json.dump({'sent': sent, 'seen': seen, 'services': srv, 'diags': diags, 'alive': alive,
+               't_msgs': t_msgs, 't_services': time.monotonic() - t1}, open(out, 'w'))
+    print('fuzz done', flush=True)
+''')
+
+
+def run_fuzz(tmp_path, env, n_msgs, n_srv):
+    P = Procs(tmp_path, env)
+    out = tmp_path / 'fuzz.json'
+    try:
+        P.node('controller', 'controller', {'mode': 'auto'}, ros=('-r', '__ns:=/fz_c'))
+        P.node('estimator', 'estimator', {}, ros=('-r', '__ns:=/fz_e'))
+        P.node('sim', 'sim', {'start.encoders_subscribers': 0}, ros=('-r', '__ns:=/fz_s'))
+        t0 = time.monotonic()
+        script = tmp_path / 'fuzzer.py'
+        script.write_text(FUZZER)
+        P.start('fuzzer', [PY, '-u', str(script), str(out), str(n_msgs), str(n_srv), '5'])
+        P.procs['fuzzer'].wait(timeout=170)
+        wall = time.monotonic() - t0
+        assert P.procs['fuzzer'].returncode == 0, P.log('fuzzer')[-3000:]
+        for tag in ('controller', 'estimator', 'sim'):
+            assert P.procs[tag].poll() is None, f'{tag} died:\n{P.log(tag)[-3000:]}'
+    finally:
+        P.stop_all(['controller', 'estimator', 'sim'])
+    for tag in ('controller', 'estimator', 'sim'):
+        assert P.procs[tag].returncode == 0, (tag, P.log(tag)[-3000:])
+    no_tracebacks(P, ['controller', 'estimator', 'sim', 'fuzzer'])
+    r = json.loads(out.read_text())
+    assert r['alive'], 'the controller did not answer after the fuzz'
+    d = r['diags']
+    r['ctl'] = d['/fz_c/controller'][1]
+    r['est'] = d['/fz_e/estimator'][1]
+    r['sim'] = next(v for k, v in d.items() if k.startswith('/fz_s/sim'))[1]
+    r['wall'] = round(wall, 1)
+    return r
+
+
+@pytest.mark.timeout(180)
+def test_fuzz_every_subscriber(tmp_path, ros_env):
+    """>= 10 000 random messages into controller ``state``, estimator ``encoders`` and
+    ``command``, simulator ``command``: nothing dies, refusals counted, every command published
+    by the controller finite with |u| <= 10, every estimate and plant state finite."""
+    n = int(os.environ.get('RWPEND_FUZZ_MESSAGES', '10000'))
+    r = run_fuzz(tmp_path, ros_env, n, 0)
+    seen, ctl, est, sim = r['seen'], r['ctl'], r['est'], r['sim']
+    ctl_in = int(ctl['samples']) + int(ctl['out_of_order_states'])
+    est_in = int(est['samples']) + int(est['refused_samples'])
+    sim_in = int(sim['commands']) + int(sim['rejected_commands']) + int(sim['stale_commands'])
+    m = {'sent_per_topic': r['sent'], 'wall_s': r['wall'], 'send_s': round(r['t_msgs'], 1),
+         'controller_states_received': ctl_in,
+         'controller': {k: int(ctl[k]) for k in ('bad_states', 'out_of_order_states', 'stale_episodes',
+                                                 'overspeed_trips', 'law_errors')},
+         'controller_commands_seen': seen['commands'], 'bad_commands': seen['bad_commands'],
+         'estimator_encoders_received': est_in,
+         'estimator': {k: int(est[k]) for k in ('samples', 'refused_samples', 'refused_commands', 'seq_gaps')},
+         'estimates_seen': seen['states'], 'bad_estimates': seen['bad_states'],
+         'sim_commands_received': sim_in,
+         'sim': {k: int(sim[k]) for k in ('commands', 'rejected_commands', 'stale_commands', 'saturated_commands')},
+         'true_states_seen': seen['truth'], 'bad_true_states': seen['bad_truth']}
+    print('measured:', json.dumps(m))
+    assert all(v >= n for v in r['sent'].values())
+    assert ctl_in >= 0.95 * n and est_in >= 0.95 * n and sim_in >= 0.95 * n, m
+    assert seen['bad_commands'] == 0 and seen['commands'] > n // 2
+    assert seen['bad_states'] == 0 and seen['bad_truth'] == 0
+    assert int(ctl['bad_states']) > n // 10 and int(ctl['out_of_order_states']) > 0      # refused, counted
+    assert int(est['refused_samples']) > n // 20 and int(est['refused_commands']) > n // 20
+    assert int(sim['rejected_commands']) > n // 20 and int(sim['saturated_commands']) > 0
+
+
+@pytest.mark.timeout(180)
+def test_fuzz_every_service(tmp_path, ros_env):
+    """Random requests to set_mode, set_parameters (controller, estimator, simulator), reset,
+    disturb and estop, all at once: every request answered, malformed ones refused, nothing dies."""
+    n = int(os.environ.get('RWPEND_FUZZ_REQUESTS', '10000'))
+    r = run_fuzz(tmp_path, ros_env, 0, n)
+    m = {'requests_per_service': n, 'services': r['services'], 'wall_s': r['wall'],
+         'services_s': round(r['t_services'], 1), 'controller_param_errors': int(r['ctl']['param_errors'])}
+    print('measured:', json.dumps(m))
+    for name, s in r['services'].items():
+        assert s['answered'] == n and s['lost'] == 0, (name, s)
+    sv = r['services']
+    assert sv['ctl_set_mode']['refused'] > 0 and sv['sim_disturb']['refused'] > 0
+    assert sv['ctl_set_parameters']['refused'] > n // 2 and sv['est_set_parameters']['refused'] > n // 2
+    assert sv['sim_set_parameters']['ok'] == 0           # every simulator parameter is read-only
+
+
+# ------------------------------------------------------------------ 5. e-stop
+@pytest.mark.timeout(120)
+def test_estop_holds_the_plant_at_zero_until_cleared(tmp_path, ros_env):
+    bag = tmp_path / 'bag'
+    log = tmp_path / 'stack.log'
+    stack = subprocess.Popen([RWPEND, 'up', '--lockstep', '--mode', 'auto', '--theta0', str(UPRIGHT),
+                              '--record', str(bag), '--set', f'sim.lockstep_timeout={LOCKSTEP_TIMEOUT}'],
+                             env=ros_env, stdout=open(log, 'w'), stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        end = time.monotonic() + 60
+        while 'auto/catch' not in log.read_text() and time.monotonic() < end:
+            assert stack.poll() is None, log.read_text()[-3000:]
+            time.sleep(0.1)
+        time.sleep(1.5)
+        t_raise = time.time_ns()
+        assert 'raised' in rwpend(['estop'], ros_env).stdout
+        t_raised = time.time_ns()
+        time.sleep(2.0)
+        t_clear = time.time_ns()
+        assert 'cleared' in rwpend(['estop', '--clear'], ros_env).stdout
+        t_cleared = time.time_ns()
+        time.sleep(2.0)
+    finally:
+        stack.send_signal(signal.SIGINT)
+        stack.wait(timeout=40)
+    out = log.read_text()
+    assert stack.returncode == 0 and 'Traceback' not in out, out[-3000:]
+    cmd, truth = assert_commands_sane(bag)
+    diag = [d for d in diagnostics(bag) if d[1].endswith('sim: plant')]
+    on = next(d for d in diag if d[4].get('estop') == 'True' and d[0] > t_raise)
+    off = next(d for d in diag if d[4].get('estop') == 'False' and d[0] > on[0])
+    assert t_raise < on[0] < t_raised + 1e9 and t_clear < off[0] < t_cleared + 1e9
+    seq = truth['seq'].astype(np.int64)
+    log_ns = truth['_log_ns']
+    # the first sample published after the e-stop took effect shows zero
+    k_on = int(np.nonzero(log_ns > on[0])[0][0])
+    j = k_on + int(np.nonzero(truth['u_commanded'][k_on:] == 0.0)[0][0])
+    m = {'estop_to_zero_samples': int(j - k_on), 'estop_to_zero_ms_wall': round((int(log_ns[j]) - on[0]) / 1e6, 2)}
+    assert m['estop_to_zero_samples'] <= 2, m
+    held = (log_ns > on[0] + 20_000_000) & (log_ns < off[0])
+    assert held.sum() > 200
+    assert np.all(truth['u_commanded'][held] == 0.0)
+    jj = np.nonzero(held)[0]
+    assert np.all(np.abs(truth['u_applied'][jj[5:]]) < 0.05)    # motor lag T_e = 0.5 ms
+    # ... whatever the controller sent meanwhile (it tried to catch the falling pendulum)
+    sent = (cmd['_log_ns'] > on[0] + 20_000_000) & (cmd['_log_ns'] < off[0])
+    m['commands_during_estop'] = int(sent.sum())
+    m['max_abs_u_sent_during_estop'] = float(np.max(np.abs(cmd['u'][sent])))
+    assert m['max_abs_u_sent_during_estop'] > 1.0
+    # cleared: the commands reach the plant again
+    m['estop_samples'] = int(diag[-1][4]['estop_samples'])
+    after = log_ns > off[0] + 20_000_000
+    assert np.any(truth['u_commanded'][after] != 0.0)
+    print('measured:', json.dumps(m), 'seq', int(seq[k_on]))
+
+
+DRIVER_CMD_NODE = textwrap.dedent('''
+    import json, sys, time
+    import rclpy
+    from rwpend_msgs.msg import EncoderCounts, MotorCommand
+    from rwpend_ros.common import QOS_CONTROL, spin_executor
+    from rclpy.executors import SingleThreadedExecutor
+    u = float(sys.argv[1])
+    rclpy.init()
+    node = rclpy.create_node('constant_command')
+    pub = node.create_publisher(MotorCommand, 'command', QOS_CONTROL)
+    cmd = MotorCommand()
+    n = [0]
+    def on_enc(m):
+        cmd.header.stamp, cmd.seq, cmd.u = m.header.stamp, m.seq, u
+        pub.publish(cmd)
+        n[0] += 1
+        if n[0] == 1:
+            print('streaming', flush=True)
+    node.create_subscription(EncoderCounts, 'encoders', on_enc, QOS_CONTROL)
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    try:
+        spin_executor(ex)
+    except KeyboardInterrupt:
+        pass
+''')
+
+
+@pytest.mark.timeout(90)
+def test_driver_estop_zeroes_the_device_until_cleared(tmp_path, ros_env):
+    """Through the serial driver: the emulated device's applied torque is 0 and its amplifier
+    off from the e-stop to the clear, while a node keeps commanding u = 2."""
+    P = Procs(tmp_path, ros_env)
+    link = str(tmp_path / 'rig')
+    try:
+        P.start('emulator', [PY, '-u', '-m', 'rwpend_driver.emulator', '--link', link, '--json',
+                             '--status-period', '0.05'])
+        P.wait_log('emulator', '"ready"', 20)
+        P.start('driver', [PY, '-u', '-m', 'rwpend_driver.driver_node', '--ros-args', '-p', f'port:={link}'])
+        P.start('commander', [PY, '-u', '-c', DRIVER_CMD_NODE, '2.0'])
+        P.wait_log('commander', 'streaming', 30)
+        time.sleep(1.0)
+        assert 'raised' in rwpend(['estop', '--ns', '/'], ros_env).stdout
+        time.sleep(1.5)
+        assert 'cleared' in rwpend(['estop', '--ns', '/', '--clear'], ros_env).stdout
+        time.sleep(1.5)
+    finally:
+        P.stop_all(['commander', 'driver', 'emulator'])
+    no_tracebacks(P, ['driver', 'commander'])
+    ev = []
+    for line in P.log('emulator').splitlines():
+        try:
+            ev.append(json.loads(line))
+        except ValueError:
+            pass
+    dis = next(i for i, e in enumerate(ev) if e['event'] == 'disable' and i > 0
+               and any(x['event'] == 'status' and x['u_applied'] == 2.0 for x in ev[:i]))
+    ena = next(i for i, e in enumerate(ev) if e['event'] == 'enable' and i > dis)
+    during = [e for e in ev[dis + 1:ena] if e['event'] == 'status']
+    assert len(during) > 10 and all(e['u_applied'] == 0.0 and not e['enabled'] for e in during), during[:3]
+    after = [e for e in ev[ena:] if e['event'] == 'status']
+    assert any(e['u_applied'] == 2.0 and e['enabled'] for e in after), after[-3:]
+    m = {'driver_estop_disabled_s': round(ev[ena]['t'] - ev[dis]['t'], 2), 'status_samples_at_zero': len(during)}
+    print('measured:', json.dumps(m))
