@@ -602,7 +602,9 @@ def run_fuzz(tmp_path, env, n_msgs, n_srv):
     P = Procs(tmp_path, env)
     out = tmp_path / 'fuzz.json'
     try:
-        P.node('controller', 'controller', {'mode': 'auto'}, ros=('-r', '__ns:=/fz_c'))
+        # a deep state queue: every fuzzed state is processed (the default of 5 drops a backlog)
+        P.node('controller', 'controller', {'mode': 'auto', 'state_queue_depth': 1000},
+               ros=('-r', '__ns:=/fz_c'))
         P.node('estimator', 'estimator', {}, ros=('-r', '__ns:=/fz_e'))
         P.node('sim', 'sim', {'start.encoders_subscribers': 0}, ros=('-r', '__ns:=/fz_s'))
         t0 = time.monotonic()

@@ -43,10 +43,11 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
 
 from rwpend_msgs.msg import ControllerStatus, MotorCommand, StateEstimate
 from rwpend_msgs.srv import SetMode
-from rwpend_ros.common import QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status, run_node
+from rwpend_ros.common import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status, run_node
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
 
@@ -72,6 +73,9 @@ class ControllerNode(Node):
             description='operating mode: ' + ', '.join(MODES), **dyn))
         self.declare_parameter('status_every', 10, ParameterDescriptor(
             description='publish controller/status every N state samples (and on every switch)', **dyn))
+        self.declare_parameter('state_queue_depth', QOS_CONTROL_LATEST.depth, ParameterDescriptor(
+            description='depth of the state subscription: a controller that fell behind acts on the '
+            'newest of these and drops older states (set at start; 1..10000)', read_only=True))
         for name, default in DESIGN_DEFAULTS.items():
             self.declare_parameter(name, default, ParameterDescriptor(
                 description='design parameter, used when the gains are not given', **dyn))
@@ -121,7 +125,13 @@ class ControllerNode(Node):
         self.pub_cmd = self.create_publisher(MotorCommand, 'command', QOS_CONTROL_PUB)
         self.pub_status = self.create_publisher(ControllerStatus, 'controller/status', QOS_STATUS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        self.create_subscription(StateEstimate, 'state', self.on_state, QOS_CONTROL)
+        depth = self.get_parameter('state_queue_depth').value
+        if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= 10000:
+            raise ConfigError(f'state_queue_depth must be an integer in 1..10000, got {depth!r}')
+        self.create_subscription(StateEstimate, 'state', self.on_state,
+                                 QoSProfile(reliability=QOS_CONTROL_LATEST.reliability,
+                                            history=QOS_CONTROL_LATEST.history, depth=depth,
+                                            durability=QOS_CONTROL_LATEST.durability))
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
         self.create_timer(1.0, self.publish_diagnostics)
         self.create_timer(0.05, self._do_sync)

@@ -28,7 +28,7 @@ from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError,
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, declare_rig,
                                diagnostic_status, run_node)
 
 from .link import DriverLink, LinkConfig
@@ -36,7 +36,8 @@ from .link import DriverLink, LinkConfig
 PARAMS = {
     'port': ('', 'serial device of the rig (e.g. /dev/ttyACM0, or the emulator\'s --link path)'),
     'baud': (921600, 'baud rate (ignored by USB CDC and ptys)'),
-    'counts_per_rev': (4000, 'encoder counts per revolution; must equal what the device reports'),
+    'counts_per_rev': (0, 'encoder counts per revolution, checked against what the device reports '
+                       '(0 = rig.counts_per_rev of the rig YAML, the single source of truth)'),
     'pendulum_sign': (1, 'direction sign of the pendulum encoder (+1 or -1)'),
     'motor_sign': (1, 'direction sign of the motor: its encoder and its command (+1 or -1)'),
     'zero_on_configure': (False, 'zero both encoders at configure (pendulum hanging at rest!)'),
@@ -57,6 +58,9 @@ class DriverNode(LifecycleNode):
         for name, (default, descr) in PARAMS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True))
         p = {name: self.get_parameter(name).value for name in PARAMS}
+        self.rig = declare_rig(self)
+        if p['counts_per_rev'] == 0:
+            p['counts_per_rev'] = int(self.rig.counts_per_rev)
         self.p = p
         self.cfg = LinkConfig(port=p['port'], baud=p['baud'], counts_per_rev=p['counts_per_rev'],
                               pendulum_sign=p['pendulum_sign'], motor_sign=p['motor_sign'],

@@ -28,6 +28,12 @@ QOS_CONTROL = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=History
                          depth=1000, durability=DurabilityPolicy.VOLATILE)
 #: Publishers of the control path (the same profile; a separate name for clarity).
 QOS_CONTROL_PUB = QOS_CONTROL
+#: The controller's input (state): reliable, keep-last 5. A controller that fell behind acts on
+#: the newest state and drops the older ones, instead of working through a backlog of stale
+#: states (in real time an old state is worse than none; the plant's timeout covers the gap).
+#: The estimator keeps QOS_CONTROL: every sample feeds its observers.
+QOS_CONTROL_LATEST = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                                depth=5, durability=DurabilityPolicy.VOLATILE)
 #: Status and diagnostics.
 QOS_STATUS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                         depth=100, durability=DurabilityPolicy.VOLATILE)
