@@ -93,6 +93,8 @@ def spin_executor(executor, until: Callable[[], bool] | None = None) -> None:
     while rclpy.ok() and not (until is not None and until()):
         try:
             executor.spin_once(timeout_sec=0.1)
+        except ExternalShutdownException:
+            break   # SIGINT/SIGTERM shut the context down while waiting: the normal end
         except RuntimeError:
             # rclpy 7.1.6's EventsExecutor raises "Unable to convert call argument '0'" when
             # the context is shut down (SIGINT) during spin_once: a normal end, not an error.
