@@ -50,43 +50,14 @@ def main(argv=None) -> int:
               f'{" ".join(names)}', file=sys.stderr, flush=True)
         return 2
     ordered = [n for n in NODES if n in names]          # stop order
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rwpend_ros.common import run_nodes
 
-    from rwpend_ros.common import ConfigError, apply_scheduling, freeze_gc, make_executor, spin_executor
-    apply_scheduling()   # before rclpy.init: the DDS threads inherit it
-    rclpy.init(args=[sys.argv[0], *ros])
-    nodes = []
-    status = 0
-    try:
-        for name in reversed(ordered):                    # the plant last
-            module, cls = NODES[name]
-            nodes.append(getattr(importlib.import_module(module), cls)())
-        executor = make_executor()
-        for node in nodes:
-            executor.add_node(node)
-        freeze_gc()
-        spin_executor(executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ConfigError as exc:
-        print(f'error: {exc}', file=sys.stderr, flush=True)
-        status = 2
-    finally:
-        for node in reversed(nodes):                      # stop order: controller first
-            close = getattr(node, 'close', None)
-            if callable(close):
-                try:
-                    close()
-                except Exception as exc:  # noqa: BLE001 - report, keep shutting down
-                    print(f'error while closing {node.get_name()}: {exc}', file=sys.stderr, flush=True)
-        for node in reversed(nodes):
-            try:
-                node.destroy_node()
-            except Exception:  # noqa: BLE001 - context may be gone
-                pass
-        rclpy.try_shutdown()
-    return status
+    def factory(name):
+        module, cls = NODES[name]
+        return lambda: getattr(importlib.import_module(module), cls)()
+
+    # built plant last, closed in stop order (controller first)
+    return run_nodes([factory(n) for n in reversed(ordered)], [sys.argv[0], *ros])
 
 
 if __name__ == '__main__':

@@ -157,20 +157,29 @@ def freeze_gc() -> None:
 
 
 def run_node(factory: Callable[[], Any], args: list[str] | None = None) -> int:
-    """Run one node in this process until SIGINT/SIGTERM; returns the exit status.
+    """Run one node in this process until SIGINT/SIGTERM; returns the exit status
+    (:func:`run_nodes` with one factory)."""
+    return run_nodes([factory], args)
 
-    ``factory()`` builds the node (after rclpy.init). A ConfigError while building is
-    printed and gives status 2. A node may define ``close()``, called before destruction
-    (e.g. to zero the motor or finalise a file). Priority / affinity: :func:`apply_scheduling`.
+
+def run_nodes(factories: Iterable[Callable[[], Any]], args: list[str] | None = None) -> int:
+    """Run nodes in this process on one executor until SIGINT/SIGTERM; returns the exit status.
+
+    The factories build the nodes in the given order (after rclpy.init); the nodes are closed
+    and destroyed in the reverse order. A ConfigError while building is printed and gives
+    status 2. A node may define ``close()``, called before destruction (e.g. to zero the motor
+    or finalise a file). Priority / affinity: :func:`apply_scheduling`.
     """
-    apply_scheduling()
+    apply_scheduling()   # before rclpy.init: the DDS threads inherit it
     rclpy.init(args=args)
-    node = None
+    nodes = []
     status = 0
     try:
-        node = factory()
+        for factory in factories:
+            nodes.append(factory())
         executor = make_executor()
-        executor.add_node(node)
+        for node in nodes:
+            executor.add_node(node)
         freeze_gc()
         spin_executor(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -179,14 +188,18 @@ def run_node(factory: Callable[[], Any], args: list[str] | None = None) -> int:
         print(f'error: {exc}', file=sys.stderr, flush=True)
         status = 2
     finally:
-        if node is not None:
+        for node in reversed(nodes):
             close = getattr(node, 'close', None)
             if callable(close):
                 try:
                     close()
                 except Exception as exc:  # noqa: BLE001 - report, keep shutting down
-                    print(f'error while closing: {exc}', file=sys.stderr, flush=True)
-            node.destroy_node()
+                    print(f'error while closing {node.get_name()}: {exc}', file=sys.stderr, flush=True)
+        for node in reversed(nodes):
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001 - the context may be gone
+                pass
         rclpy.try_shutdown()
     return status
 
