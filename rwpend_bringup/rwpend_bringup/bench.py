@@ -191,6 +191,7 @@ def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
     if spec_hook is not None:
         spec_hook(specs)
     log = _Tee(out / f'{tag}.log', echo)
+    env, trace_dir = _with_trace(env, out / f'{tag}.trace')
     launcher = Launcher(specs, namespace=a.ns, params_files=files, env=env, out=log)
     load0 = _loadavg()
     try:
@@ -220,7 +221,53 @@ def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
     res['cpu_cores_total'] = round(sum(v for v in cpu.values() if v is not None), 4)
     res['cpu_window_s'] = round(window, 3)
     res.update(bag_metrics(bag, ns, h, (w0, w1)))
+    if trace_dir is not None:
+        res.update(trace_metrics(trace_dir, res.get('window_seq')))
     return res
+
+
+def _with_trace(env: dict, directory: Path) -> tuple[dict, Path | None]:
+    """env with RWPEND_TRACE (rwpend_ros.trace) set to a fresh ``directory``, unless the caller's
+    env says RWPEND_TRACE=0."""
+    if env.get('RWPEND_TRACE', '').strip() == '0':
+        return env, None
+    if directory.exists():
+        shutil.rmtree(directory)
+    directory.mkdir(parents=True)
+    return {**env, 'RWPEND_TRACE': str(directory)}, directory
+
+
+def trace_metrics(directory: Path, window_seq=None) -> dict:
+    """Latency as the plant sees it, and where it goes, from the nodes' traces
+    (rwpend_ros.trace: CLOCK_MONOTONIC marks taken inside each node's callbacks).
+
+    ``plant_latency_us``: sample instant k (real time: t0 + k h; lockstep: when the simulator
+    starts sample k) to the simulator's callback receiving command k -- exact, no extra DDS
+    reader in the path. ``plant_rx_late_fraction``: command k received after the instant of
+    sample k+1, or never. ``stages_us``: p50/p99 of each stage of the path (sim.tick -> sim.pub
+    -> est.rx -> est.pub -> ctl.rx -> ctl.pub -> sim.rx). ``step_us`` (lockstep): sample k to
+    sample k+1."""
+    import numpy as np
+
+    from rwpend_ros.trace import load, stages
+    marks = load(directory)
+    tick, rx = marks.get('sim.tick', {}), marks.get('sim.rx', {})
+    ks = sorted(k for k in tick if k + 1 in tick)
+    if window_seq:
+        ks = [k for k in ks if window_seq[0] <= k <= window_seq[1]]
+    if not ks:
+        return {'trace_error': f'no traced sample in {directory}'}
+    lat = np.array([rx[k] - tick[k] for k in ks if k in rx]) / 1e3
+    late = sum(1 for k in ks if k not in rx or rx[k] > tick[k + 1])
+    step = np.array([tick[k + 1] - tick[k] for k in ks]) / 1e3
+    st = stages(marks, seqs=ks)
+    return {'plant_latency_us': percentiles(lat),
+            'plant_rx_late_fraction': late / len(ks), 'plant_rx_late_samples': late,
+            'plant_traced_samples': len(ks),
+            'step_us': percentiles(step, (50, 99)),
+            'stages_us': {name: percentiles(v, (50, 99)) for name, v in st.items()},
+            'trace_source': ('CLOCK_MONOTONIC marks inside the nodes (rwpend_ros.trace); latency = '
+                             'sample instant to the simulator receiving the command')}
 
 
 def bag_metrics(bag: Path, ns: str, h: float, window_ns: tuple[int, int] | None = None) -> dict:
@@ -362,6 +409,7 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
     if spec_hook is not None:
         spec_hook(specs)
     log = _Tee(out / f'{tag}.log', echo)
+    env, trace_dir = _with_trace(env, out / f'{tag}.trace')
     launcher = Launcher(specs, namespace=a.ns, params_files=files, env=env, out=log)
     t0 = time.monotonic()
     load0 = _loadavg()
@@ -400,6 +448,10 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
         res['cpu_window_s'] = round(tb - ta, 3)
         known = [v for v in cpu.values() if v is not None]
         res['cpu_s_per_simulated_s'] = round(sum(known) / simulated, 3) if known and simulated else None
+    if trace_dir is not None:
+        tm = trace_metrics(trace_dir)
+        res['step_us'] = tm.get('step_us')
+        res['stages_us'] = tm.get('stages_us')
     return res
 
 
@@ -446,6 +498,13 @@ def summary_text(res: dict) -> str:
                 f"{_fmt(None if plate is None else 100 * plate, 3):>7} {_fmt(jit.get('p99')):>8} "
                 f"{sum(drops) if drops else 'n/a':>8} {_fmt(r.get('cpu_cores_total'), 2):>5} "
                 f"{_fmt(r.get('other_cpu_cores'), 2):>6}")
+            pl = r.get('plant_latency_us')
+            if pl:
+                pr = r.get('plant_rx_late_fraction')
+                lines.append(f"            at the plant (trace): latency p50 {_fmt(pl.get('p50'))}, p99 "
+                             f"{_fmt(pl.get('p99'))}, p99.9 {_fmt(pl.get('p99.9'))}, max {_fmt(pl.get('max'))} us; "
+                             f"late {_fmt(None if pr is None else 100 * pr, 3)} %")
+                lines.append('            stages p50/p99 (us): ' + _stages_text(r.get('stages_us')))
             lines.append('            CPU per process (cores): ' + ', '.join(
                 f'{k} {_fmt(v, 2)}' for k, v in r.get('cpu_cores', {}).items())
                 + f"; load {r.get('loadavg_before')}")
@@ -456,12 +515,22 @@ def summary_text(res: dict) -> str:
                          f"{'yes' if r['recorder'] else 'no ':<3}  {_fmt(r['simulated_s'], 1)} s in "
                          f"{_fmt(r['wall_s'], 2)} s = {_fmt(r['sim_per_wall'], 2)}x real time, CPU "
                          f"{_fmt(r.get('cpu_s_per_simulated_s'), 2)} s/s; load {r.get('loadavg_before')}")
+            if r.get('stages_us'):
+                lines.append(f"            step p50 {_fmt((r.get('step_us') or {}).get('p50'))} us; stages p50/p99 (us): "
+                             + _stages_text(r['stages_us']))
     d = res.get('decode')
     if d:
         lines.append(f"bag decode: {d['messages']} messages, read {_fmt(d.get('read_s'), 3)} s, decode "
                      f"{_fmt(d.get('decode_s'), 3)} s = {_fmt(d.get('msgs_per_s'))} msg/s decode, "
                      f"{_fmt(d.get('read_and_decode_msgs_per_s'))} msg/s read+decode")
     return '\n'.join(lines)
+
+
+def _stages_text(st) -> str:
+    if not st:
+        return 'n/a'
+    return ', '.join(f"{k.replace(' -> ', '>')} {_fmt(v.get('p50'))}/{_fmt(v.get('p99'))}"
+                     for k, v in st.items() if k != 'total')
 
 
 # ------------------------------------------------------------------ main
@@ -492,6 +561,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('-v', '--verbose', action='store_true', help="show the nodes' output")
     p.add_argument('--rt-priority', type=int, default=50, metavar='N',
                    help='./rwpend up --rt-priority of the runs (default 50; 0 = ordinary scheduling)')
+    p.add_argument('--set', action='append', default=[], metavar='NODE.PARAM=VALUE',
+                   help='./rwpend up --set of the runs (repeatable), e.g. sim.wake_early_us=100')
+    p.add_argument('--cpus', default=None, metavar='LOOP[:RECORDER]',
+                   help='./rwpend up --cpus of the runs (CPU affinity), e.g. 1:0')
     p.add_argument('--json', action='store_true', help='print the JSON instead of the summary')
     return p
 
@@ -522,11 +595,20 @@ def main(argv=None) -> int:
     if not 0 <= a.rt_priority <= 99:
         print('rwpend bench: error: --rt-priority must be in 0..99', file=sys.stderr)
         return 2
-    up_extra = ['--rt-priority', str(a.rt_priority)]
+    up_extra = ['--rt-priority', str(a.rt_priority), *(x for v in a.set for x in ('--set', v))]
+    if a.cpus:
+        up_extra += ['--cpus', a.cpus]
+    try:
+        _stack(up_extra)      # refuse bad --set / --cpus before any run
+    except (ValueError, SystemExit) as exc:
+        if not isinstance(exc, SystemExit):
+            print(f'rwpend bench: error: {exc}', file=sys.stderr)
+        return 2
     res = {'started': time.time(), 'machine': machine_info(),
            'settings': {'duration_s': duration, 'lockstep_duration_s': ls_dur, 'periods_s': list(periods),
                         'layouts': list(layouts), 'domain_id': int(env['ROS_DOMAIN_ID']),
                         'namespace': a.ns, 'quick': a.quick, 'rt_priority': a.rt_priority,
+                        'set': list(a.set), 'cpus': a.cpus,
                         'command': 'rwpend bench ' + ' '.join(sys.argv[1:] if argv is None else argv)},
            'realtime': [], 'lockstep': [], 'decode': None}
     say = (lambda s: print(s, file=sys.stderr, flush=True))
@@ -560,6 +642,8 @@ def main(argv=None) -> int:
             for r in res['realtime'] + res['lockstep']:
                 if r.get('bag') and Path(r['bag']).is_dir():
                     shutil.rmtree(r['bag'], ignore_errors=True)
+            for d in out.glob('*.trace'):
+                shutil.rmtree(d, ignore_errors=True)
         (out / 'bench.json').write_text(json.dumps(res, indent=2) + '\n', encoding='utf-8')
     if a.json:
         print(json.dumps(res, indent=2))

@@ -133,6 +133,10 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='SCHED_FIFO priority N (1-99) for the loop processes (plant, estimator, '
                    'controller), N-10 for the recorder; falls back to nice -10 where real-time '
                    'scheduling is not permitted (default 0: ordinary scheduling); see PERFORMANCE.md')
+    p.add_argument('--cpus', default=None, metavar='LOOP[:RECORDER]',
+                   help='CPU affinity: the loop processes (plant, estimator, controller) on the CPUs '
+                   'LOOP (e.g. 1 or 0,1), the recorder on RECORDER if given (e.g. --cpus 1:0); '
+                   'see PERFORMANCE.md')
     p.add_argument('--composed', action='store_true',
                    help='plant (simulator), estimator and controller as nodes of ONE process on one '
                    'executor (the recorder stays a process of its own); see PERFORMANCE.md')
@@ -227,6 +231,23 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     if prio:
         for s in specs:
             s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - 10) if s.name == 'recorder' else prio)
+    cpus = getattr(a, 'cpus', None)
+    if cpus:
+        loop, _, rec = cpus.partition(':')
+        n = os.cpu_count() or 1
+        for part in (loop, rec):
+            ids = [c.strip() for c in part.split(',')] if part else []
+            if part and not all(c.isdigit() and int(c) < n for c in ids):
+                raise ValueError(f'--cpus: CPU numbers 0..{n - 1} separated by commas, LOOP[:RECORDER], '
+                                 f'got {cpus!r}')
+        if not loop:
+            raise ValueError(f'--cpus: LOOP CPUs missing in {cpus!r}')
+        for s in specs:
+            if s.name == 'recorder':
+                if rec:
+                    s.env['RWPEND_CPUS'] = rec
+            else:
+                s.env['RWPEND_CPUS'] = loop
     files = [str(rig_file()), str(stack_file()), *map(str, a.params)]
     return specs, files
 

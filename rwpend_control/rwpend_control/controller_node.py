@@ -36,6 +36,8 @@ All algorithms live in :mod:`rwpend_control.supervisor`, :mod:`.laws`, :mod:`.de
 from __future__ import annotations
 
 import math
+import struct
+import time
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -47,6 +49,8 @@ from rclpy.qos import QoSProfile
 
 from rwpend_msgs.msg import ControllerStatus, MotorCommand, StateEstimate
 from rwpend_msgs.srv import SetMode
+from rwpend_ros import wire
+from rwpend_ros.trace import tracer
 from rwpend_ros.common import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status, run_node
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
@@ -112,6 +116,9 @@ class ControllerNode(Node):
             raise ConfigError(msg)
 
         self.samples = 0
+        self.malformed_states = 0    # states whose bytes do not decode (refused, not answered)
+        self._last_header = wire.pack_header(0, 0, '')   # of the newest state (frame_id of a stale command)
+        self.trace = tracer('controller')   # None unless RWPEND_TRACE is set (profiling)
         self.unanswered = 0          # states refused without a command (out of order)
         self.law_errors = 0          # exceptions inside the control laws (u = 0)
         self.param_errors = 0        # exceptions while validating parameters (refused)
@@ -131,7 +138,7 @@ class ControllerNode(Node):
         self.create_subscription(StateEstimate, 'state', self.on_state,
                                  QoSProfile(reliability=QOS_CONTROL_LATEST.reliability,
                                             history=QOS_CONTROL_LATEST.history, depth=depth,
-                                            durability=QOS_CONTROL_LATEST.durability))
+                                            durability=QOS_CONTROL_LATEST.durability), raw=True)
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
         self.create_timer(1.0, self.publish_diagnostics)
         self.create_timer(0.05, self._do_sync)
@@ -262,19 +269,32 @@ class ControllerNode(Node):
                 self._syncing = False
 
     # ------------------------------------------------------------ callbacks
-    def on_state(self, msg: StateEstimate) -> None:
+    def on_state(self, data: bytes) -> None:
+        """One state sample, taken as wire bytes (rwpend_ros.wire: no message object built per
+        sample); the command goes out as bytes too, with the state's header (stamp and
+        frame_id) copied through, or now if the state's stamp is zero."""
+        rx = time.monotonic_ns() if self.trace is not None else 0
         now_t = self.get_clock().now()
         now = now_t.nanoseconds * 1e-9
-        stamp = msg.header.stamp
-        if stamp.sec == 0 and stamp.nanosec == 0:
-            stamp = now_t.to_msg()
-        t = stamp.sec + stamp.nanosec * 1e-9
         try:
-            u, st = self.ctrl.update(t, msg.seq, msg.theta, msg.theta_dot, msg.wheel_angle, msg.wheel_rate,
-                                     msg.friction, now=now)
+            header, seq, theta, theta_dot, wheel_angle, wheel_rate, friction, _ = wire.unpack_state(data)
+        except (struct.error, IndexError) as exc:   # truncated bytes: counted, not answered
+            self.malformed_states += 1
+            self.get_logger().warn(f'malformed state refused: {exc}', throttle_duration_sec=1.0)
+            return
+        if rx:
+            self.trace('ctl.rx', seq, rx)
+        self._last_header = header
+        sec, nanosec = wire.header_stamp(header)
+        if sec == 0 and nanosec == 0:
+            sec, nanosec = divmod(now_t.nanoseconds, 1_000_000_000)
+            header = wire.pack_header(sec, nanosec, wire.header_frame_id(header))
+        t = sec + nanosec * 1e-9
+        try:
+            u, st = self.ctrl.update(t, seq, theta, theta_dot, wheel_angle, wheel_rate, friction, now=now)
         except Exception as exc:  # noqa: BLE001 - a fault in a law: zero torque, reported
             self.law_errors += 1
-            u, st = 0.0, Status(t=t, seq=msg.seq, mode=self.ctrl.mode, law=self.ctrl.law,
+            u, st = 0.0, Status(t=t, seq=seq, mode=self.ctrl.mode, law=self.ctrl.law,
                                 last_switch=self.ctrl.last_switch, switch_count=self.ctrl.switch_count,
                                 reason=self.ctrl.reason, fault=f'internal error: {type(exc).__name__}: {exc}')
         if not st.answer:
@@ -286,12 +306,9 @@ class ControllerNode(Node):
         if st.note:
             self.stale_fault = ''
             self.get_logger().info(st.note, throttle_duration_sec=1.0)
-        c = self.cmd_msg
-        c.header.stamp = stamp
-        c.header.frame_id = msg.header.frame_id
-        c.seq = msg.seq
-        c.u = u
-        self.pub_cmd.publish(c)
+        if self.trace is not None:
+            self.trace('ctl.pub', seq)
+        self.pub_cmd.publish(wire.pack_command(header, seq, u))
         self.samples += 1
         self._since_status += 1
         self.last_status = st
@@ -300,7 +317,7 @@ class ControllerNode(Node):
                 or self._since_status >= self.status_every:
             self._since_status = 0
             self._last_fault_kind = fault_kind
-            self.publish_status(st, stamp)
+            self.publish_status(st, Time(sec=sec, nanosec=nanosec))
             if st.note:
                 self.publish_diagnostics()
         if st.event is not None:
@@ -325,6 +342,7 @@ class ControllerNode(Node):
         stamp = now_t.to_msg()
         c = self.cmd_msg
         c.header.stamp = stamp
+        c.header.frame_id = wire.header_frame_id(self._last_header)
         c.seq = st.seq
         c.u = 0.0
         self.pub_cmd.publish(c)
@@ -388,6 +406,7 @@ class ControllerNode(Node):
                 'last_state_seq': wd.last_seq, 'overspeed_trips': ctrl.overspeed_trips,
                 'saturation_trips': ctrl.saturation_trips, 'fall_trips': ctrl.fall_trips,
                 'law_errors': self.law_errors, 'param_errors': self.param_errors,
+                'malformed_states': self.malformed_states,
                 'friction_compensation': self.ctrl.config.friction_compensation,
             })]
         self.pub_diag.publish(arr)

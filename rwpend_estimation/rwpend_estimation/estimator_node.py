@@ -20,6 +20,7 @@ All algorithms live in :mod:`rwpend_estimation.estimators` (pure, no rclpy).
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import asdict, fields
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -30,6 +31,7 @@ from std_srvs.srv import Trigger
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
 from rwpend_ros import wire
+from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status,
                                run_node)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
@@ -112,6 +114,7 @@ class EstimatorNode(Node):
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.create_timer(float(period), self.publish_diagnostics)
 
+        self.trace = tracer('estimator')      # None unless RWPEND_TRACE is set (profiling)
         self.state_packer = wire.StatePacker(self.config.estimator)
         self.joint_packer = wire.JointStatePacker(('pendulum', 'wheel'))
         self.get_logger().info(f'estimator {self.config.estimator}, h = {self.rig.sample_period * 1e3:g} ms, '
@@ -157,7 +160,12 @@ class EstimatorNode(Node):
         self.command(int(msg.seq), msg.u)
 
     def on_command_raw(self, data: bytes) -> None:
-        seq, u = wire.unpack_command(data)
+        try:
+            seq, u = wire.unpack_command(data)
+        except (struct.error, IndexError) as exc:
+            self.refused_commands += 1
+            self.last_error = f'malformed command: {exc}'
+            return
         self.command(seq, u)
 
     def command(self, seq: int, u: float) -> None:
@@ -182,7 +190,15 @@ class EstimatorNode(Node):
                            msg.pendulum_counts, msg.motor_counts))
 
     def on_encoders_raw(self, data: bytes) -> None:
-        self.sample(Sample(*wire.unpack_encoders(data)))
+        try:
+            msg = Sample(*wire.unpack_encoders(data))
+        except (struct.error, IndexError) as exc:   # truncated bytes: counted, nothing else changes
+            self.refused_samples += 1
+            self.last_error = f'malformed encoder sample: {exc}'
+            return
+        if self.trace is not None:
+            self.trace('est.rx', msg.seq)
+        self.sample(msg)
 
     def sample(self, msg: 'Sample') -> None:
         """Sample k is estimated with the command that answered sample k-1 (held over
@@ -227,6 +243,8 @@ class EstimatorNode(Node):
         if self.last_seq is not None and msg.seq != self.last_seq + 1:
             self.seq_gaps += 1
         self.last_seq = msg.seq
+        if self.trace is not None:
+            self.trace('est.pub', msg.seq)
         self.pub_state.publish(self.state_packer.pack(
             msg.header, msg.seq, e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate, e.friction, e.energy))
         if self.publish_joint_states:

@@ -195,6 +195,13 @@ def run_nodes(factories: Iterable[Callable[[], Any]], args: list[str] | None = N
                     close()
                 except Exception as exc:  # noqa: BLE001 - report, keep shutting down
                     print(f'error while closing {node.get_name()}: {exc}', file=sys.stderr, flush=True)
+        for node in nodes:
+            trace = getattr(node, 'trace', None)    # rwpend_ros.trace (RWPEND_TRACE set)
+            if trace is not None:
+                try:
+                    trace.dump()
+                except OSError as exc:
+                    print(f'trace of {node.get_name()} not written: {exc}', file=sys.stderr, flush=True)
         for node in reversed(nodes):
             try:
                 node.destroy_node()

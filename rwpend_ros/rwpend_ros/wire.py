@@ -25,6 +25,9 @@ _HEAD = struct.Struct('<iII')          # stamp.sec, stamp.nanosec, frame_id leng
 _ENC_TAIL = struct.Struct('<Qii')      # seq, pendulum_counts, motor_counts
 _CMD_TAIL = struct.Struct('<Qd')       # seq, u
 _STATE_TAIL = struct.Struct('<Q6dI')   # seq, theta ... energy, estimator length
+_STATE_FIELDS = struct.Struct('<Q6d')  # seq, theta ... energy (the estimator name not decoded)
+_PLANT_TAIL = struct.Struct('<Q8d2?')  # seq, theta ... disturbance, stuck, command_timeout
+_CLOCK = struct.Struct('<iI')          # rosgraph_msgs/Clock: builtin_interfaces/Time
 _U32 = struct.Struct('<I')
 _2D = struct.Struct('<2d')
 
@@ -80,6 +83,27 @@ def unpack_encoders(data: bytes) -> tuple[bytes, int, int, int]:
 def unpack_command(data: bytes) -> tuple[int, float]:
     """rwpend_msgs/MotorCommand -> (seq, u) (the header is not needed by its readers)."""
     return _CMD_TAIL.unpack_from(data, _after_header(data))
+
+
+def unpack_state(data: bytes) -> tuple:
+    """rwpend_msgs/StateEstimate -> (header bytes, seq, theta, theta_dot, wheel_angle,
+    wheel_rate, friction, energy); the estimator's name is not decoded."""
+    end = header_end(data)
+    return (bytes(data[4:end]),) + _STATE_FIELDS.unpack_from(data, end + _pad8(end - 4))
+
+
+def pack_plant_state(header: bytes, seq: int, theta: float, theta_dot: float, wheel_angle: float,
+                     wheel_rate: float, u_commanded: float, u_applied: float, friction: float,
+                     disturbance: float, stuck: bool, command_timeout: bool) -> bytes:
+    """rwpend_msgs/PlantState (the simulator's sim/true_state)."""
+    return (ENCAPSULATION + header + bytes(_pad8(len(header)))
+            + _PLANT_TAIL.pack(seq, theta, theta_dot, wheel_angle, wheel_rate, u_commanded, u_applied,
+                               friction, disturbance, stuck, command_timeout))
+
+
+def pack_clock(sec: int, nanosec: int) -> bytes:
+    """rosgraph_msgs/Clock."""
+    return ENCAPSULATION + _CLOCK.pack(sec, nanosec)
 
 
 def pack_encoders(header: bytes, seq: int, pendulum_counts: int, motor_counts: int) -> bytes:

@@ -6,7 +6,9 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
-from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
+from rosgraph_msgs.msg import Clock
+
+from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState, StateEstimate
 from rwpend_ros import wire
 
 FRAMES = ['', 'a', 'rwpend', 'rig_2', 'abcdefgh', 'x' * 13]
@@ -60,3 +62,43 @@ def test_joint_state_pack(frame, names):
     m = deserialize_message(data, JointState)
     assert m.header.frame_id == frame and list(m.name) == list(names)
     assert list(m.position) == [1.5, -2.5] and list(m.velocity) == [3.5, -4.5] and len(m.effort) == 0
+
+
+@pytest.mark.parametrize('frame', FRAMES)
+@pytest.mark.parametrize('name', ['', 'observer2'])
+def test_state_unpack(frame, name):
+    m = header(StateEstimate(), frame)
+    m.seq, m.theta, m.theta_dot, m.wheel_angle, m.wheel_rate, m.friction, m.energy = \
+        2**33 + 1, 3.1, -0.5, 12.0, -300.25, 0.125, -1e-9
+    m.estimator = name
+    h, *rest = wire.unpack_state(serialize_message(m))
+    assert tuple(rest) == (m.seq, m.theta, m.theta_dot, m.wheel_angle, m.wheel_rate, m.friction, m.energy)
+    assert h == wire.pack_header(12, 345_678_901, frame)
+
+
+@pytest.mark.parametrize('frame', FRAMES)
+@pytest.mark.parametrize('flags', [(False, False), (True, False), (False, True), (True, True)])
+def test_plant_state_pack(frame, flags):
+    data = wire.pack_plant_state(wire.pack_header(12, 345_678_901, frame), 9, 0.1, 0.2, 0.3, 0.4,
+                                 -10.0, -9.5, 0.7, 1.5, *flags)
+    m = deserialize_message(data, PlantState)
+    ref = header(PlantState(), frame)
+    ref.seq, ref.theta, ref.theta_dot, ref.wheel_angle, ref.wheel_rate = 9, 0.1, 0.2, 0.3, 0.4
+    ref.u_commanded, ref.u_applied, ref.friction, ref.disturbance = -10.0, -9.5, 0.7, 1.5
+    ref.stuck, ref.command_timeout = flags
+    assert m == ref    # (not byte-equal: rclpy leaves its padding bytes uninitialised)
+
+
+def test_clock_pack():
+    c = Clock()
+    c.clock.sec, c.clock.nanosec = 5, 999_000_000
+    assert wire.pack_clock(5, 999_000_000) == serialize_message(c)
+
+
+@pytest.mark.parametrize('unpack', [wire.unpack_encoders, wire.unpack_command, wire.unpack_state])
+@pytest.mark.parametrize('data', [b'', b'\x00\x01\x00\x00', b'\x00\x01\x00\x00' + b'\xff' * 12])
+def test_truncated_raises_struct_error(unpack, data):
+    """Malformed bytes raise struct.error, which the nodes' raw callbacks count and drop."""
+    import struct
+    with pytest.raises(struct.error):
+        unpack(data)

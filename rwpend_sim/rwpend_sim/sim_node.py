@@ -15,6 +15,7 @@ All algorithms live in :mod:`rwpend_sim.sim_core` and :mod:`rwpend_model.plant`.
 """
 from __future__ import annotations
 
+import struct
 import threading
 import time
 
@@ -27,6 +28,8 @@ from std_srvs.srv import SetBool
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState
 from rwpend_msgs.srv import Disturb
+from rwpend_ros import wire
+from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, declare_rig,
                                diagnostic_status, run_node)
 from rwpend_sim.sim_core import SimCore
@@ -40,6 +43,9 @@ PARAMS = {
     'start.state_subscribers': (0, 'lockstep: subscribers of state (the controller) to wait for before sample 0'),
     'start.first_command_timeout': (10.0, 'lockstep: wall seconds sample 0 waits for its command '
                                     '(start-up under load; later samples wait lockstep_timeout)'),
+    'wake_early_us': (0, 'real time: wake this many us before each sample instant and wait the rest '
+                      'actively (yielding the CPU): a sample goes out closer to its instant, at the '
+                      'cost of CPU (0 = sleep until the instant)'),
     'command_timeout_samples': (3, 'samples without a fresh command before u = 0'),
     'initial.theta': (0.0, 'initial pendulum angle (rad, 0 hanging, pi upright)'),
     'initial.theta_dot': (0.0, 'initial pendulum angular velocity (rad/s)'),
@@ -66,9 +72,9 @@ class SimNode(Node):
             self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True))
         p = {name: self.get_parameter(name).value for name in PARAMS}
         if (p['lockstep_timeout'] <= 0 or p['diagnostics_period'] <= 0 or p['duration'] < 0
-                or p['start.first_command_timeout'] <= 0):
+                or p['start.first_command_timeout'] <= 0 or not 0 <= p['wake_early_us'] <= 1_000_000):
             raise ConfigError('lockstep_timeout, start.first_command_timeout and diagnostics_period '
-                              'must be > 0, duration >= 0')
+                              'must be > 0, duration >= 0, wake_early_us in 0..1000000')
         try:
             self.core = SimCore(self.rig, command_timeout_samples=p['command_timeout_samples'],
                                 theta=p['initial.theta'], theta_dot=p['initial.theta_dot'],
@@ -92,19 +98,23 @@ class SimNode(Node):
         self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
-        self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
+        # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
+        self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL, raw=True)
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
         self.create_timer(p['diagnostics_period'], self.publish_diagnostics)
 
-        self.enc = EncoderCounts()
-        self.enc.header.frame_id = p['frame_id']
-        self.true = PlantState()
-        self.true.header.frame_id = p['frame_id']
-        self.clock_msg = Clock()
+        self.frame_id = p['frame_id']
         self.wall_start = time.monotonic()
         self.overruns = 0
+        self.malformed_commands = 0
+        #: seq of the published sample whose command is awaited (the plant integrates
+        #: [t_k, t_k+1) as soon as command k arrives), None when there is none
+        self.awaiting: int | None = None
+        self.steps = 0                  # samples integrated
+        self.step_wall = time.monotonic()   # lockstep: wall time of the newest sample
+        self.trace = tracer('sim')      # None unless RWPEND_TRACE is set (profiling)
         self.thread = threading.Thread(target=self._run_loop, name='sim-loop', daemon=True)
         self.thread.start()
         mode = 'lockstep' if self.lockstep else 'real time'
@@ -112,11 +122,25 @@ class SimNode(Node):
                                f'a = {self.rig.a:.3f}, b_p = {self.rig.b_p:.4f}, b_r = {self.rig.b_r:.2f}')
 
     # ------------------------------------------------------------ callbacks
-    def on_command(self, msg: MotorCommand) -> None:
+    def on_command(self, data: bytes) -> None:
+        """A command (wire bytes). When it answers the awaited sample k, the plant is integrated
+        over [t_k, t_k+1) at once, here: in real time the next sample is then ready to go out at
+        its instant; in lockstep the next sample goes out from here, without waking another
+        thread (the loop thread only watches the lockstep timeout)."""
+        try:
+            seq, u = wire.unpack_command(data)
+        except (struct.error, IndexError) as exc:   # truncated bytes: counted, nothing else changes
+            with self.lock:
+                self.malformed_commands += 1
+                self.core.counters.rejected_commands += 1
+                self.core.counters.last_reject_reason = f'malformed command: {exc}'
+            return
+        if self.trace is not None:
+            self.trace('sim.rx', seq)
         with self.lock:
-            ok, _ = self.core.command(msg.seq, msg.u)
-            if ok:
-                self.lock.notify_all()
+            ok, _ = self.core.command(seq, u)
+            if ok and self.awaiting is not None and self.core.u_seq >= self.awaiting:
+                self._step()
 
     def set_estop(self, on: bool) -> str:
         with self.lock:
@@ -156,23 +180,22 @@ class SimNode(Node):
 
     # ------------------------------------------------------------ publishing
     def publish_sample(self, stamp_ns: int) -> None:
+        """Sample core.k: /clock (lockstep), encoders, sim/true_state, as wire bytes."""
         seq, pc, mc = self.core.sample()
+        if self.trace is not None:
+            self.trace('sim.pub', seq)
         sec, nsec = divmod(stamp_ns, 1_000_000_000)
-        enc = self.enc
-        enc.header.stamp.sec, enc.header.stamp.nanosec = sec, nsec
-        enc.seq, enc.pendulum_counts, enc.motor_counts = seq, pc, mc
-        self.pub_enc.publish(enc)
+        if self.pub_clock is not None:
+            self.pub_clock.publish(wire.pack_clock(sec, nsec))
+        header = wire.pack_header(sec, nsec, self.frame_id)
+        self.pub_enc.publish(wire.pack_encoders(header, seq, pc, mc))
         if self.p['publish_true_state']:
-            s = self.core.plant.state
-            t = self.true
-            t.header.stamp.sec, t.header.stamp.nanosec = sec, nsec
-            t.seq = seq
-            t.theta, t.theta_dot, t.wheel_angle, t.wheel_rate = s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate
-            t.u_commanded = self.core.plant.u_held
-            t.u_applied, t.friction, t.stuck = s.torque, s.friction, s.stuck
-            t.disturbance = self.core.plant.disturbance
-            t.command_timeout = self.core.timed_out
-            self.pub_true.publish(t)
+            plant = self.core.plant
+            s = plant.state
+            self.pub_true.publish(wire.pack_plant_state(
+                header, seq, s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate, plant.u_held, s.torque,
+                s.friction, plant.disturbance, bool(s.stuck), bool(self.core.timed_out)))
+        self.awaiting = seq
 
     def done(self) -> bool:
         d = self.p['duration']
@@ -205,46 +228,78 @@ class SimNode(Node):
                 raise
 
     def loop_realtime(self) -> None:
+        """Sample k goes out at t0 + k h (absolute deadlines on the monotonic clock). The plant is
+        integrated over [t_k, t_k+1) when command k arrives (:meth:`on_command`), or at t_k+1 with
+        the command held then if it did not: so at each instant only the publishing is left."""
         self.wait_for_loop(need_command=False)
         period_ns = int(round(self.h * 1e9))
         t0_ros = self.get_clock().now().nanoseconds
         t0 = time.monotonic_ns()
         k = 0
-        while not self.stop.is_set() and not self.done():
+        trace = self.trace
+        early = int(self.p['wake_early_us']) * 1000
+        while not self.stop.is_set():
             with self.lock:
+                if self.awaiting is not None:      # command k-1 not in time: the held one
+                    self.awaiting = None
+                    self._advance()
+                if self.done():
+                    break
+                if trace is not None:
+                    trace('sim.tick', self.core.k, t0 + k * period_ns)
                 self.publish_sample(t0_ros + k * period_ns)
             k += 1
             deadline = t0 + k * period_ns
             delay = deadline - time.monotonic_ns()
-            if delay > 0:
-                time.sleep(delay / 1e9)
+            if delay > early:
+                time.sleep((delay - early) / 1e9)
             elif delay < -period_ns:
                 self.overruns += 1
-            with self.lock:
-                self._advance()
+            while early and time.monotonic_ns() < deadline:
+                time.sleep(0)                      # yields the GIL (the executor thread runs)
         self.finish()
 
+    def _step(self) -> None:
+        """Lock held, command for the awaited sample in: integrate; lockstep: the next sample."""
+        self.awaiting = None
+        self._advance()
+        self.steps += 1
+        if self.lockstep:
+            if self.done() or self.stop.is_set():
+                self.lock.notify_all()             # the loop thread finishes
+            else:
+                self._publish_lockstep()
+
+    def _publish_lockstep(self) -> None:
+        stamp = self.core.k * int(round(self.h * 1e9))
+        self.step_wall = time.monotonic()
+        if self.trace is not None:
+            self.trace('sim.tick', self.core.k)
+        self.publish_sample(stamp)
+
     def loop_lockstep(self) -> None:
+        """Publishes sample 0, then watches: each command answering the awaited sample steps
+        the plant and publishes the next (:meth:`on_command`); a sample whose command does not
+        come within ``lockstep_timeout`` wall seconds (``start.first_command_timeout`` for
+        sample 0) is integrated with u = 0 and counted late."""
         self.wait_for_loop(need_command=True)
-        period_ns = int(round(self.h * 1e9))
         timeout = self.p['lockstep_timeout']
-        while not self.stop.is_set() and not self.done():
-            k = self.core.k
-            stamp = k * period_ns
-            sec, nsec = divmod(stamp, 1_000_000_000)
-            self.clock_msg.clock.sec, self.clock_msg.clock.nanosec = sec, nsec
-            self.pub_clock.publish(self.clock_msg)
-            with self.lock:
-                self.publish_sample(stamp)
-                answered = self.lock.wait_for(lambda: self.core.u_seq >= k or self.stop.is_set(),
-                                              timeout if k else self.p['start.first_command_timeout'])
-                if not answered and k == 0:
+        with self.lock:
+            self._publish_lockstep()
+            while not self.stop.is_set() and not self.done():
+                limit = timeout if self.core.k else self.p['start.first_command_timeout']
+                remaining = self.step_wall + limit - time.monotonic()
+                if remaining > 0:
+                    # notified at stop and at the end only (a step does not wake this thread):
+                    # look again at least every lockstep_timeout
+                    self.lock.wait(min(remaining, timeout))
+                    continue
+                if self.core.k == 0:
                     self.get_logger().warn('lockstep: no command for sample 0 within '
                                            f"{self.p['start.first_command_timeout']:g} s; running with u = 0")
-                if not answered:
-                    self.core.counters.late_commands += 1
-                    self.core.last_command_k = None   # no command for this sample: u = 0
-                self._advance()
+                self.core.counters.late_commands += 1
+                self.core.last_command_k = None   # no command for this sample: u = 0
+                self._step()
         self.finish()
 
     def _advance(self) -> None:
@@ -282,7 +337,7 @@ class SimNode(Node):
             'stale_commands': c.stale_commands, 'saturated_commands': c.saturated_commands,
             'timeout_samples': c.timeout_samples, 'timeouts': c.timeouts,
             'late_commands': c.late_commands, 'estop_samples': c.estop_samples,
-            'overruns': self.overruns, 'estop': self.core.estop, 'finished': self.finished,
+            'overruns': self.overruns, 'malformed_commands': self.malformed_commands, 'estop': self.core.estop, 'finished': self.finished,
         }
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
