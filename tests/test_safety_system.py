@@ -500,6 +500,10 @@ FUZZER = textwrap.dedent('''
             # the simulator accepts answers to its current samples: mostly those, some garbage
             c.seq = u64(k) if key == 'est_command' or rnd.random() < 0.3 else max(sim_seq[0] - rnd.randrange(3), 0)
             pubs[key].publish(c); sent[key] += 1
+        if k % 50 == 7:
+            # truncated wire bytes (a raw publisher can send anything): counted and dropped
+            for key in pubs:
+                pubs[key].publish(b'\\x00\\x01\\x00\\x00' + bytes(rnd.randrange(0, 24))); sent[key] += 1
         if k % 100 == 99:
             # pace by the controller's and the estimator's answers (out-of-order states get none,
             # refused encoder samples neither): at most a few hundred messages in flight, far
@@ -665,6 +669,7 @@ def test_fuzz_every_subscriber(tmp_path, ros_env):
     assert seen['bad_commands'] == 0 and seen['commands'] > n // 2
     assert seen['bad_states'] == 0 and seen['bad_truth'] == 0
     assert int(ctl['bad_states']) > n // 10 and int(ctl['out_of_order_states']) > 0      # refused, counted
+    assert int(ctl['malformed_states']) > 0 and int(sim['malformed_commands']) > 0
     assert int(est['refused_samples']) > n // 20 and int(est['refused_commands']) > n // 20
     assert int(sim['rejected_commands']) > n // 20 and int(sim['saturated_commands']) > 0
 

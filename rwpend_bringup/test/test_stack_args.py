@@ -1,0 +1,39 @@
+"""``./rwpend up`` arguments -> node specs (no process started): priority and CPU affinity."""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from rwpend_bringup.cli import Parser, add_stack_args, build_stack
+
+
+def specs_of(*argv):
+    p = Parser(prog='rwpend up')
+    add_stack_args(p)
+    specs, _ = build_stack(p.parse_args(list(argv)), p.prog)
+    return {s.name: s for s in specs}
+
+
+def test_rt_priority_and_cpus_go_to_the_environment():
+    s = specs_of('--record', '/tmp/x', '--rt-priority', '50', '--cpus', '1:0')
+    assert s['sim'].env['RWPEND_RT_PRIORITY'] == '50' and s['recorder'].env['RWPEND_RT_PRIORITY'] == '40'
+    assert {s[n].env['RWPEND_CPUS'] for n in ('sim', 'estimator', 'controller')} == {'1'}
+    assert s['recorder'].env['RWPEND_CPUS'] == '0'
+
+
+def test_cpus_without_recorder_part_leaves_the_recorder_free():
+    s = specs_of('--record', '/tmp/x', '--cpus', '0')
+    assert s['sim'].env['RWPEND_CPUS'] == '0' and 'RWPEND_CPUS' not in s['recorder'].env
+    assert 'RWPEND_CPUS' not in specs_of()['sim'].env
+
+
+def test_cpus_composed():
+    s = specs_of('--composed', '--cpus', '0')
+    assert s['stack'].env['RWPEND_CPUS'] == '0'
+
+
+@pytest.mark.parametrize('bad', ['x', ':0', '1:y', str(os.cpu_count() or 1), '0,,1', '-1'])
+def test_bad_cpus_refused(bad):
+    with pytest.raises(ValueError, match='--cpus'):
+        specs_of('--cpus', bad)
