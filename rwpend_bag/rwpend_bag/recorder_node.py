@@ -149,6 +149,10 @@ def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool) -> in
 
     from rwpend_ros.common import apply_scheduling, freeze_gc, make_executor
     apply_scheduling()
+    # the bag-writer thread works through its queue in batches (ThreadedBagWriter.poll_s):
+    # hand the GIL over to the receiving thread within 0.5 ms (default 5 ms), so a batch does
+    # not delay the receive times that become the bag's log times
+    sys.setswitchinterval(0.0005)
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
     signals = [0]

@@ -205,6 +205,9 @@ class ThreadedBagWriter:
     recording report (``recording_report.json`` and metadata custom_data) and finalises the bag.
     """
 
+    #: seconds between two looks at the queue when it is empty
+    poll_s = 0.01
+
     def __init__(self, path, **kwargs):
         self.bag = BagWriter(path, **kwargs)
         self.seqs = SeqTracker()
@@ -223,12 +226,17 @@ class ThreadedBagWriter:
     def _run(self) -> None:
         q = self._q
         bag = self.bag
+        poll = self.poll_s
         while True:
             try:
-                item = q.get(timeout=0.25)
+                item = q.get_nowait()
             except queue.Empty:
                 if not bag.closed:
                     bag.maybe_flush()
+                # one wake-up per poll period, not one per message: at 1 kHz the recorder gets
+                # ~5000 messages/s, and waking this thread for each cost the recorder CPU and
+                # the loop's processes CPU time (PERFORMANCE.md)
+                time.sleep(poll)
                 continue
             kind = item[0]
             try:
