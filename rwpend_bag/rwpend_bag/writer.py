@@ -206,7 +206,7 @@ class ThreadedBagWriter:
     """
 
     #: seconds between two looks at the queue when it is empty
-    poll_s = 0.01
+    poll_s = 0.002
 
     def __init__(self, path, **kwargs):
         self.bag = BagWriter(path, **kwargs)
