@@ -16,6 +16,9 @@ Events of the stack (in the order of one sample's path):
     ctl.rx      the controller's callback receives the state
     ctl.pub     the controller publishes the command
     sim.rx      the simulator's callback receives the command
+
+and, in every traced process, ``gc.start`` / ``gc.stop`` (seq = the generation collected) around
+each collection of Python's cyclic garbage collector.
 """
 from __future__ import annotations
 
@@ -37,6 +40,11 @@ class Trace:
         self.ev = array('b')
         self.seq = array('q')
         self.ns = array('q')
+        import gc
+        gc.callbacks.append(self._gc)      # collections of the cyclic GC: gc.start / gc.stop
+
+    def _gc(self, phase: str, info: dict) -> None:
+        self('gc.' + phase, info.get('generation', -1))
 
     def __call__(self, event: str, seq: int, ns: int | None = None) -> None:
         i = self._ids.get(event)
