@@ -185,10 +185,13 @@ class SimNode(Node):
         if self.trace is not None:
             self.trace('sim.pub', seq)
         sec, nsec = divmod(stamp_ns, 1_000_000_000)
-        if self.pub_clock is not None:
-            self.pub_clock.publish(wire.pack_clock(sec, nsec))
         header = wire.pack_header(sec, nsec, self.frame_id)
         self.pub_enc.publish(wire.pack_encoders(header, seq, pc, mc))
+        if self.pub_clock is not None:
+            # after the encoder sample: the sample is on the loop's critical path, /clock (three
+            # readers) is not; a node may see sample k before its clock reads t_k (the controller's
+            # state watchdog takes the stamp then, rwpend_control.safety)
+            self.pub_clock.publish(wire.pack_clock(sec, nsec))
         if self.p['publish_true_state']:
             plant = self.core.plant
             s = plant.state
