@@ -18,6 +18,11 @@ from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` r
      of sample k+1, or never; ``plant_late_fraction``: what the plant actually held over
      [t_k, t_k+1) (``sim/true_state.u_commanded`` of sample k+1) was not command k -- exact, and
      independent of the recorder's timing (see :func:`plant_late`);
+   * latency **at the plant** and its breakdown -- from the nodes' traces (rwpend_ros.trace,
+     ``RWPEND_TRACE`` set for every run; ``RWPEND_TRACE=0`` in the environment turns it off):
+     sample instant to the simulator's command callback receiving command k (the true
+     sensor-to-actuator delay, no extra reader in the path), the fraction of commands received
+     after the next sample instant, and p50/p99 of each stage (:func:`trace_metrics`);
    * sample-period jitter -- from the recorder's receive times of ``encoders`` (an upper bound
      of the simulator's publishing jitter);
    * dropped messages per topic -- seq gaps seen by the recorder (``recording_report.json``);

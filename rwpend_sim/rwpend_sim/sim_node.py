@@ -72,9 +72,11 @@ class SimNode(Node):
             self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True))
         p = {name: self.get_parameter(name).value for name in PARAMS}
         if (p['lockstep_timeout'] <= 0 or p['diagnostics_period'] <= 0 or p['duration'] < 0
-                or p['start.first_command_timeout'] <= 0 or not 0 <= p['wake_early_us'] <= 1_000_000):
+                or p['start.first_command_timeout'] <= 0):
             raise ConfigError('lockstep_timeout, start.first_command_timeout and diagnostics_period '
-                              'must be > 0, duration >= 0, wake_early_us in 0..1000000')
+                              'must be > 0, duration >= 0')
+        if not 0 <= p['wake_early_us'] <= 1_000_000:
+            raise ConfigError(f"wake_early_us must be in 0..1000000 (us), got {p['wake_early_us']}")
         try:
             self.core = SimCore(self.rig, command_timeout_samples=p['command_timeout_samples'],
                                 theta=p['initial.theta'], theta_dot=p['initial.theta_dot'],
