@@ -182,7 +182,7 @@ class SimNode(Node):
 
     # ------------------------------------------------------------ publishing
     def publish_sample(self, stamp_ns: int) -> None:
-        """Sample core.k: /clock (lockstep), encoders, sim/true_state, as wire bytes."""
+        """Sample core.k as wire bytes: encoders, then /clock (lockstep), then sim/true_state."""
         seq, pc, mc = self.core.sample()
         if self.trace is not None:
             self.trace('sim.pub', seq)
@@ -342,7 +342,8 @@ class SimNode(Node):
             'stale_commands': c.stale_commands, 'saturated_commands': c.saturated_commands,
             'timeout_samples': c.timeout_samples, 'timeouts': c.timeouts,
             'late_commands': c.late_commands, 'estop_samples': c.estop_samples,
-            'overruns': self.overruns, 'malformed_commands': self.malformed_commands, 'estop': self.core.estop, 'finished': self.finished,
+            'overruns': self.overruns, 'malformed_commands': self.malformed_commands,
+            'estop': self.core.estop, 'finished': self.finished,
         }
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
