@@ -788,7 +788,10 @@ def test_driver_estop_zeroes_the_device_until_cleared(tmp_path, ros_env):
         P.start('driver', [PY, '-u', '-m', 'rwpend_driver.driver_node', '--ros-args', '-p', f'port:={link}'])
         P.start('commander', [PY, '-u', '-c', DRIVER_CMD_NODE, '2.0'])
         P.wait_log('commander', 'streaming', 30)
-        time.sleep(1.0)
+        # the device applies the commander's u = 2 before the e-stop (on a loaded machine the
+        # first commands may take longer than a fixed pause)
+        P.wait_log('emulator', '"u_applied": 2.0', 30)
+        time.sleep(0.5)
         assert 'raised' in rwpend(['estop', '--ns', '/'], ros_env).stdout
         time.sleep(1.5)
         assert 'cleared' in rwpend(['estop', '--ns', '/', '--clear'], ros_env).stdout
