@@ -26,8 +26,14 @@ from rwpend_model.rig import Rig, default_rig_file, read_params_file
 #: answering an older sample than the newest it holds.
 QOS_CONTROL = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=1000, durability=DurabilityPolicy.VOLATILE)
-#: Publishers of the control path (the same profile; a separate name for clarity).
-QOS_CONTROL_PUB = QOS_CONTROL
+#: Publishers of the control path: reliable, keep-last 100. The depth that protects a stalled
+#: reader is its own (subscriptions keep 1000: a sample delivered over shared memory waits in
+#: the reader's history); the writer's history only serves repairs. With 1000 here, every
+#: publisher of a 1 kHz topic stalled for 1.5-2.5 ms about once a second (once per history's
+#: worth of samples), which made ~1 % of the commands late; with 100 the stalls are gone
+#: (PERFORMANCE.md).
+QOS_CONTROL_PUB = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                             depth=100, durability=DurabilityPolicy.VOLATILE)
 #: The controller's input (state): reliable, keep-last 5. A controller that fell behind acts on
 #: the newest state and drops the older ones, instead of working through a backlog of stale
 #: states (in real time an old state is worse than none; the plant's timeout covers the gap).
