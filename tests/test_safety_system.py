@@ -215,8 +215,13 @@ def test_dead_controller_plant_zeroes_and_restart_swings_up_again(tmp_path, ros_
     no_tracebacks(P, ['sim', 'estimator', 'ctl2'])
     cmd, truth = assert_commands_sane(bag)
     m = {}
-    # the dead controller's last command answered seq s1; the plant's zero starts at s1 + n
-    s1 = int(cmd['seq'][cmd['_log_ns'] < kill_ns + 500_000_000].max())
+    # the dead controller's last command answered seq s1; the plant's zero starts at s1 + n.
+    # s1 is the command before the longest run of samples without a command (the dead time),
+    # found by seq, not by the recorder's receive time: when a process is SIGKILLed, Fast DDS
+    # (shared-memory transport) can block other participants' sends to it for 1-3 s, the
+    # recorder's included, so commands sent before the kill may be logged seconds after it.
+    cs = np.unique(cmd['seq'].astype(np.int64))
+    s1 = int(cs[np.argmax(np.diff(cs))])
     seq = truth['seq'].astype(np.int64)
     after = seq > s1 + 1
     # true_state k shows the command held over [t_k-1, t_k): zero from sample s1 + n
@@ -232,7 +237,7 @@ def test_dead_controller_plant_zeroes_and_restart_swings_up_again(tmp_path, ros_
     diag = [d for d in diagnostics(bag) if d[1].endswith('sim: plant') and d[0] > kill_ns - 10_000_000]
     why = next(d for d in diag if 'command timeout' in d[3])
     m['sim_diagnostics_after_kill_ms_wall'] = round((why[0] - kill_ns) / 1e6, 1)
-    assert why[0] - kill_ns < 2e9, m
+    assert why[0] - kill_ns < 5e9, m      # ~6 ms; up to 3 s when Fast DDS stalls (above)
     # the pendulum fell, and the restarted controller swung it up and caught it again
     x = deviation(truth['theta'])
     dead = (truth['_log_ns'] > kill_ns) & (truth['_log_ns'] < restart_ns)
@@ -273,7 +278,9 @@ def test_dead_estimator_controller_reports_stale_and_zeroes(tmp_path, ros_env):
     cmd, truth = assert_commands_sane(bag)
     m = {}
     state = series(bag, NS + '/state')
-    before = state['_log_ns'] < kill_ns + 300_000_000
+    # the last state before the longest run without one (by seq, not receive time: see test 1)
+    ss = np.unique(state['seq'].astype(np.int64))
+    before = state['seq'].astype(np.int64) <= ss[np.argmax(np.diff(ss))]
     s_last = int(state['seq'][before].max())
     t_last = int(state['_stamp_ns'][before][np.argmax(state['seq'][before])])
     st = series(bag, NS + '/controller/status')
