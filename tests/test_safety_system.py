@@ -209,7 +209,7 @@ def test_dead_controller_plant_zeroes_and_restart_swings_up_again(tmp_path, ros_
         restart_ns = time.time_ns()
         P.node('ctl2', 'controller', {**ctl, 'mode': 'auto'})
         P.wait_log('ctl2', 'auto/catch', 60)
-        time.sleep(4.0)
+        time.sleep(6.0)                                  # >= 1 s of balance, also under load
     finally:
         P.stop_all(['ctl2', 'estimator', 'sim', 'recorder'])
     no_tracebacks(P, ['sim', 'estimator', 'ctl2'])

@@ -162,6 +162,7 @@ def machine_info() -> dict:
             'kernel': platform.release(), 'python': platform.python_version(),
             'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp'),
             'executor': os.environ.get('RWPEND_EXECUTOR', 'events'),
+            'transport': os.environ.get('RWPEND_TRANSPORT', 'udp'),
             'loadavg_start': _loadavg()}
 
 
@@ -483,7 +484,7 @@ def summary_text(res: dict) -> str:
     st = res['settings']
     lines = ['rwpend bench -- ' + time.strftime('%Y-%m-%d %H:%M', time.localtime(res['started'])),
              f"machine: {m['cpus']} CPU ({m['cpu_model']}), Python {m['python']}, {m['rmw']}, executor "
-             f"{m['executor']}; load average {m.get('loadavg_start')} -> {m.get('loadavg_end')}",
+             f"{m['executor']}, transport {m.get('transport', 'udp')}; load average {m.get('loadavg_start')} -> {m.get('loadavg_end')}",
              f"settings: rt priority {st.get('rt_priority')}, {st['duration_s']:g} s real time, "
              f"{st['lockstep_duration_s']:g} s lockstep"]
     if res['realtime']:

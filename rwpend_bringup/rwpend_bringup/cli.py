@@ -267,8 +267,10 @@ def up_main(argv) -> int:
 def run_stack(a, specs, files, on_started=None) -> int:
     launcher = Launcher(specs, namespace=a.ns, params_files=files)
     names = ', '.join(s.name for s in specs)
+    from rwpend_ros.transport import discovery_range
     print(f'rwpend: starting {names} in {a.ns} (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}, '
-          f'discovery {os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")})', flush=True)
+          f'discovery {discovery_range()}, transport {os.environ.get("RWPEND_TRANSPORT", "udp")})',
+          flush=True)
     if a.plant == 'sim':
         # the simulator exits by itself after --duration s from its sample 0 (simulated time in
         # lockstep); the wall-clock bound only catches a stack that never starts
@@ -608,6 +610,12 @@ def main(argv=None) -> int:
         return 0 if argv else 2
     cmd = argv[0]
     apply_network_defaults()
+    from rwpend_ros.transport import apply_transport
+    try:
+        apply_transport()   # every node and tool started from here inherits it
+    except ValueError as exc:
+        print(f'rwpend: {exc}', file=sys.stderr)
+        return 2
     if cmd not in COMMANDS:
         print(f'rwpend: unknown command {cmd!r}; `./rwpend --help` lists them', file=sys.stderr)
         return 2

@@ -1,0 +1,62 @@
+"""rwpend_ros.transport: which Fast DDS transport the processes get (pure: environment only)."""
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from rwpend_ros.transport import PROFILE, apply_transport, discovery_range
+
+
+def test_localhost_becomes_udp_profile():
+    env = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    assert 'udp' in apply_transport(env)
+    assert env['FASTRTPS_DEFAULT_PROFILES_FILE'] == str(PROFILE)
+    assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SYSTEM_DEFAULT'
+    assert discovery_range(env) == 'LOCALHOST'
+    before = dict(env)
+    apply_transport(env)                      # a child process applies it again: no change
+    assert env == before
+
+
+@pytest.mark.parametrize('rng', ['SUBNET', ''])
+def test_subnet_gets_udp_builtin_transport(rng):
+    env = {'ROS_AUTOMATIC_DISCOVERY_RANGE': rng} if rng else {}
+    apply_transport(env)
+    assert env['FASTDDS_BUILTIN_TRANSPORTS'] == 'UDPv4'
+    assert 'FASTRTPS_DEFAULT_PROFILES_FILE' not in env
+    assert discovery_range(env) == (rng or 'SUBNET')
+
+
+@pytest.mark.parametrize('extra', [
+    {'RWPEND_TRANSPORT': 'shm'},
+    {'FASTRTPS_DEFAULT_PROFILES_FILE': '/etc/mine.xml'},
+    {'FASTDDS_BUILTIN_TRANSPORTS': 'SHM'},
+    {'ROS_STATIC_PEERS': '192.168.1.7'},
+    {'RMW_IMPLEMENTATION': 'rmw_cyclonedds_cpp'},
+])
+def test_user_configuration_is_left_alone(extra):
+    env = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', **extra}
+    before = dict(env)
+    apply_transport(env)
+    assert env == before
+
+
+def test_off_range_untouched_and_bad_choice_refused():
+    env = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'}
+    apply_transport(env)
+    assert env == {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'}
+    env = {'RWPEND_TRANSPORT': 'carrier-pigeon', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    with pytest.raises(ValueError, match='RWPEND_TRANSPORT'):
+        apply_transport(env)
+    assert env == {'RWPEND_TRANSPORT': 'carrier-pigeon', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+
+
+def test_profile_is_udp_on_loopback_only():
+    ns = {'d': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+    root = ET.parse(PROFILE).getroot()
+    t = root.find('.//d:transport_descriptor', ns)
+    assert t.find('d:type', ns).text == 'UDPv4'
+    assert [a.text for a in t.findall('.//d:interfaceWhiteList/d:address', ns)] == ['127.0.0.1']
+    p = root.find(".//d:participant[@is_default_profile='true']", ns)
+    assert p.find('.//d:useBuiltinTransports', ns).text == 'false'
+    assert p.find('.//d:initialPeersList//d:address', ns).text == '127.0.0.1'
+    assert p.find('.//d:metatrafficMulticastLocatorList', ns) is None
