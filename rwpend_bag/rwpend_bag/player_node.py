@@ -81,8 +81,8 @@ class Player(Node):
 
 
 def run(sched: Schedule, rate: float, loop: bool, clock: bool, wait: float = 2.0) -> int:
-    from rwpend_ros.transport import apply_transport
-    apply_transport()    # before rclpy.init (RWPEND_TRANSPORT was checked by the CLI)
+    from rwpend_ros.transport import apply_transport_or_exit
+    apply_transport_or_exit()  # before rclpy.init
     rclpy.init(args=[])  # not sys.argv: its --remap a:=b would become rcl remap rules
     node = None
     try:

@@ -148,8 +148,8 @@ def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool) -> in
     from rclpy.signals import SignalHandlerOptions
 
     from rwpend_ros.common import apply_scheduling, freeze_gc, make_executor
-    from rwpend_ros.transport import apply_transport
-    apply_transport()   # before rclpy.init (RWPEND_TRANSPORT was checked by the CLI)
+    from rwpend_ros.transport import apply_transport_or_exit
+    apply_transport_or_exit()  # before rclpy.init
     apply_scheduling()
     # the bag-writer thread works through its queue in batches (ThreadedBagWriter.poll_s):
     # hand the GIL over to the receiving thread within 0.5 ms (default 5 ms), so a batch does

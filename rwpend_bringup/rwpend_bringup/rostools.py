@@ -88,8 +88,8 @@ class RosTool:
         self.timeout = timeout
 
     def __enter__(self) -> 'RosTool':
-        from rwpend_ros.transport import apply_transport
-        apply_transport()    # before rclpy.init (RWPEND_TRANSPORT was checked by the CLI)
+        from rwpend_ros.transport import apply_transport_or_exit
+        apply_transport_or_exit()  # before rclpy.init
         rclpy.init(args=[])  # not sys.argv (a value like a:=b would be read as a remap)
         self.node = Node('rwpend_cli', namespace='/', start_parameter_services=False)
         return self

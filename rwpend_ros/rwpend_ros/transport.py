@@ -26,6 +26,7 @@ another RMW. Processes with either setting talk to each other (over UDP).
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 from typing import MutableMapping
 
@@ -59,6 +60,16 @@ def apply_transport(env: MutableMapping[str, str] | None = None) -> str:
         env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
         return 'udp (FASTDDS_BUILTIN_TRANSPORTS=UDPv4)'
     return f'left to rmw_fastrtps (discovery range {rng})'
+
+
+def apply_transport_or_exit(env: MutableMapping[str, str] | None = None) -> str:
+    """:func:`apply_transport` for a process's entry point: a bad ``RWPEND_TRANSPORT`` is
+    reported on stderr and ends the process with status 2 (no traceback)."""
+    try:
+        return apply_transport(env)
+    except ValueError as exc:
+        print(f'error: {exc}', file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
 
 
 def discovery_range(env: MutableMapping[str, str] | None = None) -> str:

@@ -60,3 +60,11 @@ def test_profile_is_udp_on_loopback_only():
     assert p.find('.//d:useBuiltinTransports', ns).text == 'false'
     assert p.find('.//d:initialPeersList//d:address', ns).text == '127.0.0.1'
     assert p.find('.//d:metatrafficMulticastLocatorList', ns) is None
+
+
+def test_entry_point_exits_2_with_a_message(capsys):
+    from rwpend_ros.transport import apply_transport_or_exit
+    with pytest.raises(SystemExit) as exc:
+        apply_transport_or_exit({'RWPEND_TRANSPORT': 'tcp'})
+    assert exc.value.code == 2
+    assert 'RWPEND_TRANSPORT' in capsys.readouterr().err
