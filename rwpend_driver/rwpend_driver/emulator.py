@@ -76,7 +76,13 @@ def parse_args(argv):
     ap.add_argument('--unplug-after', type=float, default=0.0, help='unplug S seconds after start (test aid)')
     ap.add_argument('--replug-after', type=float, default=0.0,
                     help='replug S seconds after an unplug (test aid)')
+    ap.add_argument('--rt-priority', type=int, default=0, metavar='N',
+                    help='SCHED_FIFO priority N (1-99) for the emulated firmware, as for the real '
+                         'rig\'s microcontroller; nice -10 where not permitted (default 0: '
+                         'ordinary scheduling)')
     a = ap.parse_args(argv)
+    if not 0 <= a.rt_priority <= 99:
+        ap.error(f'--rt-priority must be in 0..99, got {a.rt_priority}')
     if not P.WATCHDOG_MIN_MS <= a.watchdog_ms <= P.WATCHDOG_MAX_MS:
         ap.error(f'--watchdog-ms must be in {P.WATCHDOG_MIN_MS}..{P.WATCHDOG_MAX_MS}, got {a.watchdog_ms}')
     for name in ('theta', 'duration', 'status_period', 'unplug_after', 'replug_after'):
@@ -233,6 +239,9 @@ class Emulator:
 
 def main(argv=None) -> int:
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    if args.rt_priority:
+        from rwpend_ros.sched import apply_scheduling
+        apply_scheduling({**os.environ, 'RWPEND_RT_PRIORITY': str(args.rt_priority)})
     emu = Emulator(args)
 
     def on_stop(signum, frame):
