@@ -29,7 +29,7 @@ from rwpend_ros.transport import apply_transport
 QOS_CONTROL = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=1000, durability=DurabilityPolicy.VOLATILE)
 #: Publishers of the control path: reliable, keep-last 100. The depth that protects a stalled
-#: reader is its own (subscriptions keep 1000: a sample delivered over shared memory waits in
+#: reader is its own (subscriptions keep 1000: a sample, once delivered, waits in
 #: the reader's history); the writer's history only serves repairs. With 1000 here, every
 #: publisher of a 1 kHz topic stalled for 1.5-2.5 ms about once a second (once per history's
 #: worth of samples), which made ~1 % of the commands late; with 100 the stalls are gone
