@@ -169,6 +169,13 @@ def assert_commands_sane(bag, topic=NS + '/command'):
     return cmd, truth
 
 
+def last_before_longest_gap(seqs) -> int:
+    """The seq just before the longest run of missing seqs: the last message of a node that was
+    killed and later restarted (found by seq, not by the recorder's receive times)."""
+    s = np.unique(np.asarray(seqs, dtype=np.int64))
+    return int(s[np.argmax(np.diff(s))])
+
+
 def no_tracebacks(procs: Procs, tags) -> None:
     for tag in tags:
         text = procs.log(tag)
@@ -220,8 +227,7 @@ def test_dead_controller_plant_zeroes_and_restart_swings_up_again(tmp_path, ros_
     # found by seq, not by the recorder's receive time: when a process is SIGKILLed, Fast DDS
     # (shared-memory transport) can block other participants' sends to it for 1-3 s, the
     # recorder's included, so commands sent before the kill may be logged seconds after it.
-    cs = np.unique(cmd['seq'].astype(np.int64))
-    s1 = int(cs[np.argmax(np.diff(cs))])
+    s1 = last_before_longest_gap(cmd['seq'])
     seq = truth['seq'].astype(np.int64)
     after = seq > s1 + 1
     # true_state k shows the command held over [t_k-1, t_k): zero from sample s1 + n
@@ -281,8 +287,7 @@ def test_dead_estimator_controller_reports_stale_and_zeroes(tmp_path, ros_env):
     m = {}
     state = series(bag, NS + '/state')
     # the last state before the longest run without one (by seq, not receive time: see test 1)
-    ss = np.unique(state['seq'].astype(np.int64))
-    before = state['seq'].astype(np.int64) <= ss[np.argmax(np.diff(ss))]
+    before = state['seq'].astype(np.int64) <= last_before_longest_gap(state['seq'])
     s_last = int(state['seq'][before].max())
     t_last = int(state['_stamp_ns'][before][np.argmax(state['seq'][before])])
     st = series(bag, NS + '/controller/status')

@@ -53,6 +53,8 @@ import threading
 import time
 from pathlib import Path
 
+from rwpend_ros.transport import transport_choice
+
 from .launch import Launcher
 
 DEFAULT_PERIODS = (0.001, 0.0005)
@@ -162,7 +164,7 @@ def machine_info() -> dict:
             'kernel': platform.release(), 'python': platform.python_version(),
             'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp'),
             'executor': os.environ.get('RWPEND_EXECUTOR', 'events'),
-            'transport': os.environ.get('RWPEND_TRANSPORT', 'udp'),
+            'transport': transport_choice(),
             'loadavg_start': _loadavg()}
 
 
@@ -484,7 +486,8 @@ def summary_text(res: dict) -> str:
     st = res['settings']
     lines = ['rwpend bench -- ' + time.strftime('%Y-%m-%d %H:%M', time.localtime(res['started'])),
              f"machine: {m['cpus']} CPU ({m['cpu_model']}), Python {m['python']}, {m['rmw']}, executor "
-             f"{m['executor']}, transport {m.get('transport', 'udp')}; load average {m.get('loadavg_start')} -> {m.get('loadavg_end')}",
+             f"{m['executor']}, transport {m.get('transport', 'udp')}; "
+             f"load average {m.get('loadavg_start')} -> {m.get('loadavg_end')}",
              f"settings: rt priority {st.get('rt_priority')}, {st['duration_s']:g} s real time, "
              f"{st['lockstep_duration_s']:g} s lockstep"]
     if res['realtime']:

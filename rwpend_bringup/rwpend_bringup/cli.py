@@ -267,9 +267,9 @@ def up_main(argv) -> int:
 def run_stack(a, specs, files, on_started=None) -> int:
     launcher = Launcher(specs, namespace=a.ns, params_files=files)
     names = ', '.join(s.name for s in specs)
-    from rwpend_ros.transport import discovery_range
+    from rwpend_ros.transport import discovery_range, transport_choice
     print(f'rwpend: starting {names} in {a.ns} (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}, '
-          f'discovery {discovery_range()}, transport {os.environ.get("RWPEND_TRANSPORT", "udp")})',
+          f'discovery {discovery_range()}, transport {transport_choice()})',
           flush=True)
     if a.plant == 'sim':
         # the simulator exits by itself after --duration s from its sample 0 (simulated time in
@@ -610,12 +610,8 @@ def main(argv=None) -> int:
         return 0 if argv else 2
     cmd = argv[0]
     apply_network_defaults()
-    from rwpend_ros.transport import apply_transport
-    try:
-        apply_transport()   # every node and tool started from here inherits it
-    except ValueError as exc:
-        print(f'rwpend: {exc}', file=sys.stderr)
-        return 2
+    from rwpend_ros.transport import apply_transport_or_exit
+    apply_transport_or_exit()   # every node and tool started from here inherits it
     if cmd not in COMMANDS:
         print(f'rwpend: unknown command {cmd!r}; `./rwpend --help` lists them', file=sys.stderr)
         return 2

@@ -17,7 +17,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from rwpend_model.rig import Rig, default_rig_file, read_params_file
 from rwpend_ros.sched import apply_scheduling  # noqa: F401 - re-exported (pure module)
-from rwpend_ros.transport import apply_transport
+from rwpend_ros.transport import apply_transport_or_exit
 
 #: Control path (encoders, command, state, joint_states): reliable, keep-last 1000 on both
 #: sides. Reliable delivery lost no samples across processes in our measurements
@@ -136,13 +136,10 @@ def run_nodes(factories: Iterable[Callable[[], Any]], args: list[str] | None = N
     and destroyed in the reverse order. A ConfigError while building is printed and gives
     status 2. A node may define ``close()``, called before destruction (e.g. to zero the motor
     or finalise a file). Priority / affinity: :func:`apply_scheduling`; DDS transport:
-    :func:`rwpend_ros.transport.apply_transport` (UDP by default).
+    :func:`rwpend_ros.transport.apply_transport` (UDP by default; exit status 2 for a bad
+    ``RWPEND_TRANSPORT``).
     """
-    try:
-        apply_transport()    # before rclpy.init: Fast DDS reads it when the participant is made
-    except ValueError as exc:
-        print(f'error: {exc}', file=sys.stderr, flush=True)
-        return 2
+    apply_transport_or_exit()   # before rclpy.init: Fast DDS reads it when the participant is made
     apply_scheduling()   # before rclpy.init: the DDS threads inherit it
     rclpy.init(args=args)
     nodes = []

@@ -28,20 +28,26 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import MutableMapping
+from typing import Mapping, MutableMapping
 
 PROFILE = Path(__file__).resolve().parent / 'fastdds_udp_localhost.xml'
 CHOICES = ('udp', 'shm')
+
+
+def transport_choice(env: Mapping[str, str] | None = None) -> str:
+    """``RWPEND_TRANSPORT`` as given (``udp`` when unset); ValueError when unknown."""
+    env = os.environ if env is None else env
+    choice = env.get('RWPEND_TRANSPORT', 'udp').strip().lower() or 'udp'
+    if choice not in CHOICES:
+        raise ValueError(f"RWPEND_TRANSPORT={env['RWPEND_TRANSPORT']!r}: expected one of {', '.join(CHOICES)}")
+    return choice
 
 
 def apply_transport(env: MutableMapping[str, str] | None = None) -> str:
     """Edit ``env`` (default os.environ) for ``RWPEND_TRANSPORT``; returns what was done, for
     the log. Raises ValueError on an unknown ``RWPEND_TRANSPORT``."""
     env = os.environ if env is None else env
-    choice = env.get('RWPEND_TRANSPORT', 'udp').strip().lower() or 'udp'
-    if choice not in CHOICES:
-        raise ValueError(f"RWPEND_TRANSPORT={env['RWPEND_TRANSPORT']!r}: expected one of {', '.join(CHOICES)}")
-    if choice == 'shm':
+    if transport_choice(env) == 'shm':
         return 'shm: rmw_fastrtps defaults (shared memory + UDP)'
     if env.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp') != 'rmw_fastrtps_cpp':
         return f"left to {env['RMW_IMPLEMENTATION']}"

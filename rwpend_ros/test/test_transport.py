@@ -3,7 +3,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from rwpend_ros.transport import PROFILE, apply_transport, discovery_range
+from rwpend_ros.transport import PROFILE, apply_transport, discovery_range, transport_choice
 
 
 def test_localhost_becomes_udp_profile():
@@ -68,3 +68,10 @@ def test_entry_point_exits_2_with_a_message(capsys):
         apply_transport_or_exit({'RWPEND_TRANSPORT': 'tcp'})
     assert exc.value.code == 2
     assert 'RWPEND_TRANSPORT' in capsys.readouterr().err
+
+
+def test_transport_choice():
+    assert transport_choice({}) == 'udp'
+    assert transport_choice({'RWPEND_TRANSPORT': ' SHM '}) == 'shm'
+    with pytest.raises(ValueError, match='expected one of udp, shm'):
+        transport_choice({'RWPEND_TRANSPORT': 'tcp'})
