@@ -63,14 +63,21 @@ def test_composed_lockstep_swings_up(tmp_path, ros_env):
     assert np.all(np.abs(cmd['u']) <= 10.0) and np.all(np.isfinite(cmd['u']))
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(90)
 def test_composed_equals_separate_in_lockstep(tmp_path, ros_env):
+    """Bit for bit, with the in-process bus (rwpend_ros.intra) carrying state and command
+    between the composed nodes, and with estimator + controller composed, plant separate."""
     bags = {}
-    for layout in ('composed', 'separate'):
+    layouts = {'composed': ['--composed'], 'control': ['--composed', 'control'], 'separate': []}
+    for layout, extra in layouts.items():
         bags[layout] = tmp_path / layout
         args = ['--lockstep', '--mode', 'auto', '--duration', '2', '--record', str(bags[layout])]
-        up(args + (['--composed'] if layout == 'composed' else []), ros_env, timeout=28)
-    a, b = read_bag(bags['composed']), read_bag(bags['separate'])
+        up(args + extra, ros_env, timeout=28)
+    for other in ('composed', 'control'):
+        _same_run(read_bag(bags[other]), read_bag(bags['separate']))
+
+
+def _same_run(a, b):
     for topic, fields in (('/rwpend/sim/true_state', ('theta', 'theta_dot', 'wheel_angle', 'wheel_rate')),
                           ('/rwpend/state', ('theta', 'theta_dot', 'wheel_rate', 'friction')),
                           ('/rwpend/command', ('u',))):

@@ -58,6 +58,8 @@ from rwpend_ros.transport import transport_choice
 from .launch import Launcher
 
 DEFAULT_PERIODS = (0.001, 0.0005)
+#: bench layouts -> ./rwpend up arguments
+LAYOUT_ARGS = {'separate': [], 'control': ['--composed', 'control'], 'composed': ['--composed', 'all']}
 SETTLE_S = 4.0            # wall seconds after start before the measured window opens
 LOCKSTEP_WALL_LIMIT = 600.0
 
@@ -193,8 +195,7 @@ def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
     if bag.exists():
         shutil.rmtree(bag)
     up = ['--mode', 'auto', '--h', repr(h), '--record', str(bag), '--ns', ns, *up_extra]
-    if layout == 'composed':
-        up.append('--composed')
+    up += LAYOUT_ARGS[layout]
     a, specs, files = _stack(up)
     if spec_hook is not None:
         spec_hook(specs)
@@ -411,8 +412,7 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
         if bag.exists():
             shutil.rmtree(bag)
         up += ['--record', str(bag)]
-    if layout == 'composed':
-        up.append('--composed')
+    up += LAYOUT_ARGS[layout]
     a, specs, files = _stack(up)
     if spec_hook is not None:
         spec_hook(specs)
@@ -555,8 +555,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('-o', '--out', default=None, help='output directory (default bench_out/)')
     p.add_argument('--h', type=float, action='append', default=None, metavar='S',
                    help='sample period(s) to run (repeatable; default 0.001 and 0.0005)')
-    p.add_argument('--layout', choices=('separate', 'composed', 'both'), default='both',
-                   help='separate processes, one composed process, or both (default)')
+    p.add_argument('--layout', action='append', default=None, choices=(*LAYOUT_ARGS, 'both', 'all'),
+                   help='separate: every node its own process; control: estimator and controller '
+                   'in one process, the plant in its own (up --composed control); composed: plant, '
+                   'estimator and controller in one process (up --composed); repeatable; both = '
+                   'separate and composed, all = the three (default)')
     p.add_argument('--lockstep-duration', type=float, default=None,
                    help='simulated seconds of each lockstep run (default 12; 4 with --quick)')
     p.add_argument('--no-realtime', action='store_true', help='skip the real-time runs')
@@ -591,7 +594,11 @@ def main(argv=None) -> int:
     if any(not (1e-5 <= h <= 0.1) for h in periods):
         print('rwpend bench: error: --h must be in [1e-5, 0.1] s', file=sys.stderr)
         return 2
-    layouts = ('separate', 'composed') if a.layout == 'both' else (a.layout,)
+    layouts = []
+    for name in a.layout or ['all']:
+        for x in {'both': ['separate', 'composed'], 'all': list(LAYOUT_ARGS)}.get(name, [name]):
+            if x not in layouts:
+                layouts.append(x)
     out = Path(a.out) if a.out else ROOT / 'bench_out'
     out.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ)

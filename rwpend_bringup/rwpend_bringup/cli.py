@@ -39,6 +39,8 @@ NODE_MODULES = {
     'controller': 'rwpend_control.controller_node',
     'driver': 'rwpend_driver.driver_node',
 }
+#: ``--composed`` values: which nodes share one process (rwpend_bringup.composed)
+COMPOSITIONS = ('all', 'control')
 
 
 class Parser(argparse.ArgumentParser):
@@ -137,9 +139,12 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='CPU affinity: the loop processes (plant, estimator, controller) on the CPUs '
                    'LOOP (e.g. 1 or 0,1), the recorder on RECORDER if given (e.g. --cpus 1:0); '
                    'see PERFORMANCE.md')
-    p.add_argument('--composed', action='store_true',
-                   help='plant (simulator), estimator and controller as nodes of ONE process on one '
-                   'executor (the recorder stays a process of its own); see PERFORMANCE.md')
+    p.add_argument('--composed', nargs='?', const='all', default=None, choices=COMPOSITIONS,
+                   help='nodes in one process on one executor: "all" (the default of a bare '
+                   '--composed): plant (simulator), estimator and controller; "control": estimator '
+                   'and controller, the plant (simulator or driver) in its own process, like '
+                   'ros2_control separates hardware from controllers. The recorder stays a process '
+                   'of its own; see PERFORMANCE.md')
 
 
 def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
@@ -217,14 +222,25 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
             raise ValueError(f'{out.parent} does not exist')
         specs.append(NodeSpec('recorder', 'rwpend_bag.cli', args=['record', '-o', str(out), '--all'],
                               ros_args=False, stop_rank=9))
-    if getattr(a, 'composed', False):
-        if plant != 'sim':
-            raise ValueError('--composed needs the simulator (--plant sim): the driver runs in its '
-                             'own process')
-        nodes = [s for s in specs if s.module in NODE_MODULES.values()]
-        specs = [NodeSpec('stack', 'rwpend_bringup.composed', args=[s.name for s in nodes],
-                          node_params={s.name: s.params for s in nodes}, stop_rank=3),
-                 *[s for s in specs if s not in nodes]]
+    composed = getattr(a, 'composed', None)
+    if composed is True:      # a caller's boolean (the flag before it took a value)
+        composed = 'all'
+    if composed:
+        if composed not in COMPOSITIONS:
+            raise ValueError(f'--composed must be one of {", ".join(COMPOSITIONS)}, got {composed!r}')
+        if composed == 'all' and plant != 'sim':
+            raise ValueError('--composed all needs the simulator (--plant sim): the driver runs in '
+                             'its own process (--composed control keeps it there)')
+        members = ('sim', 'estimator', 'controller') if composed == 'all' else ('estimator', 'controller')
+        nodes = [s for s in specs if s.name in members and s.module == NODE_MODULES[s.name]]
+        name = 'stack' if composed == 'all' else 'control'
+        first = specs.index(nodes[0])
+        rest = [s for s in specs if s not in nodes]
+        specs = [*rest[:first],
+                 NodeSpec(name, 'rwpend_bringup.composed', args=[s.name for s in nodes],
+                          node_params={s.name: s.params for s in nodes},
+                          stop_rank=min(s.stop_rank for s in nodes)),
+                 *rest[first:]]
     prio = getattr(a, 'rt_priority', 0) or 0
     if not 0 <= prio <= 99:
         raise ValueError(f'--rt-priority must be in 0..99, got {prio}')

@@ -37,3 +37,26 @@ def test_cpus_composed():
 def test_bad_cpus_refused(bad):
     with pytest.raises(ValueError, match='--cpus'):
         specs_of('--cpus', bad)
+
+
+def test_composed_layouts():
+    s = specs_of('--composed', 'all', '--record', '/tmp/x', '--rt-priority', '50')
+    assert list(s) == ['stack', 'recorder'] and s['stack'].args == ['sim', 'estimator', 'controller']
+    assert s['stack'].env['RWPEND_RT_PRIORITY'] == '50'
+    c = specs_of('--composed', 'control', '--plant', 'serial:/dev/ttyUSB0', '--rt-priority', '50')
+    assert list(c) == ['driver', 'control'] and c['control'].args == ['estimator', 'controller']
+    assert c['control'].stop_rank < c['driver'].stop_rank, 'the controller stops before the plant'
+    assert set(c['control'].node_params) == {'estimator', 'controller'}
+    assert c['driver'].env['RWPEND_RT_PRIORITY'] == c['control'].env['RWPEND_RT_PRIORITY'] == '50'
+    assert list(specs_of('--composed', 'control', '--no-controller')) == ['sim', 'control']
+
+
+def test_composed_all_refuses_the_driver():
+    with pytest.raises(ValueError, match='--composed control'):
+        specs_of('--composed', '--plant', 'serial:/dev/ttyUSB0')
+
+
+def test_bad_composed_value_refused(capsys):
+    with pytest.raises(SystemExit):
+        specs_of('--composed', 'everything')
+    assert 'invalid choice' in capsys.readouterr().err

@@ -51,7 +51,8 @@ from rwpend_msgs.msg import ControllerStatus, MotorCommand, StateEstimate
 from rwpend_msgs.srv import SetMode
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
-from rwpend_ros.common import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status, run_node
+from rwpend_ros.common import (QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher,
+                               declare_rig, diagnostic_status, local_subscription, run_node)
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
 
@@ -129,16 +130,18 @@ class ControllerNode(Node):
         self._pending_params: list[Parameter] = []
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
-        self.pub_cmd = self.create_publisher(MotorCommand, 'command', QOS_CONTROL_PUB)
+        # command reaches a simulator in this process directly (composed mode, rwpend_ros.intra)
+        self.pub_cmd = LocalPublisher(self, MotorCommand, 'command', QOS_CONTROL_PUB)
         self.pub_status = self.create_publisher(ControllerStatus, 'controller/status', QOS_STATUS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         depth = self.get_parameter('state_queue_depth').value
         if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= 10000:
             raise ConfigError(f'state_queue_depth must be an integer in 1..10000, got {depth!r}')
-        self.create_subscription(StateEstimate, 'state', self.on_state,
-                                 QoSProfile(reliability=QOS_CONTROL_LATEST.reliability,
-                                            history=QOS_CONTROL_LATEST.history, depth=depth,
-                                            durability=QOS_CONTROL_LATEST.durability), raw=True)
+        # also taken directly from an estimator in this process (composed mode, rwpend_ros.intra)
+        local_subscription(self, StateEstimate, 'state', self.on_state,
+                           QoSProfile(reliability=QOS_CONTROL_LATEST.reliability,
+                                      history=QOS_CONTROL_LATEST.history, depth=depth,
+                                      durability=QOS_CONTROL_LATEST.durability))
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
         self.create_timer(1.0, self.publish_diagnostics)
         self.create_timer(0.05, self._do_sync)

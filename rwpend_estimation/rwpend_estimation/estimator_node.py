@@ -32,8 +32,8 @@ from std_srvs.srv import Trigger
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, declare_rig, diagnostic_status,
-                               run_node)
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher, declare_rig,
+                               diagnostic_status, run_node)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
                                           make_estimator, switch_estimator)
 
@@ -104,13 +104,15 @@ class EstimatorNode(Node):
 
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
-        self.pub_state = self.create_publisher(StateEstimate, 'state', QOS_CONTROL_PUB)
+        # state reaches a controller in this process directly (composed mode, rwpend_ros.intra)
+        self.pub_state = LocalPublisher(self, StateEstimate, 'state', QOS_CONTROL_PUB)
         self.pub_joints = self.create_publisher(JointState, 'joint_states', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire): no message
         # objects built or converted field by field (measured: PERFORMANCE.md)
         self.create_subscription(EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL, raw=True)
-        self.create_subscription(MotorCommand, 'command', self.on_command_raw, QOS_CONTROL, raw=True)
+        self.command_topic = self.create_subscription(MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
+                                                      raw=True).topic_name
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.create_timer(float(period), self.publish_diagnostics)
 
@@ -210,7 +212,11 @@ class EstimatorNode(Node):
         if p is not None:
             self.pending = None
             self.process(p)
-        if 0 <= self.u_seq < msg.seq - 1 and self.u_seq >= msg.seq - 4:
+        if self.u_seq < msg.seq - 1 and self.u_seq >= msg.seq - 4 and (
+                self.u_seq >= 0 or self.count_publishers(self.command_topic) > 0):
+            # no command yet (u_seq -1: start, plant restarted) counts as answered at seq -1
+            # when a controller publishes: samples 1-3 then wait for the first commands too (in
+            # a composed lockstep run sample 1 can come before command 0, rwpend_ros.intra)
             self.pending = msg
             self.deferred += 1
             return

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from typing import Any, Callable, Iterable, Mapping
 
 import rclpy
@@ -16,6 +17,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rwpend_model.rig import Rig, default_rig_file, read_params_file
+from rwpend_ros.intra import BUS
 from rwpend_ros.sched import apply_scheduling  # noqa: F401 - re-exported (pure module)
 from rwpend_ros.transport import apply_transport_or_exit
 
@@ -48,6 +50,39 @@ QOS_STATUS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryP
 #: Latched state (e-stop): a late joiner gets the last value.
 QOS_LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class LocalPublisher:
+    """A publisher whose messages reach the subscribers of :func:`local_subscription` in this
+    process directly (the in-process bus, :mod:`rwpend_ros.intra`), then DDS as usual. Takes
+    wire bytes (the per-sample path) or message objects; everything else is the rclpy
+    publisher's (``get_subscription_count`` ...)."""
+
+    def __init__(self, node, msg_type, topic: str, qos) -> None:
+        self.pub = node.create_publisher(msg_type, topic, qos)
+        self.topic = self.pub.topic_name
+
+    def publish(self, msg) -> None:
+        if not isinstance(msg, (bytes, bytearray)):
+            if not BUS.local(self.topic):
+                self.pub.publish(msg)
+                return
+            from rclpy.serialization import serialize_message
+            msg = serialize_message(msg)
+        BUS.publish(self.topic, bytes(msg), self.pub.publish)
+
+    def __getattr__(self, name):
+        return getattr(self.pub, name)
+
+
+def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], None], qos):
+    """A raw subscription (``callback`` takes wire bytes) that also takes the messages of a
+    :class:`LocalPublisher` of another node of this process directly, without the DDS hop
+    (:mod:`rwpend_ros.intra`; the DDS copy of those is dropped). Returns the rclpy subscription."""
+    holder = []
+    sub = node.create_subscription(msg_type, topic, lambda data: holder[0].from_dds(data), qos, raw=True)
+    holder.append(BUS.subscribe(sub.topic_name, callback))
+    return sub
 
 
 class ConfigError(ValueError):
@@ -151,6 +186,7 @@ def run_nodes(factories: Iterable[Callable[[], Any]], args: list[str] | None = N
         for node in nodes:
             executor.add_node(node)
         freeze_gc()
+        BUS.thread = threading.get_ident()   # in-process delivery on this (the executor's) thread
         spin_executor(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -158,6 +194,7 @@ def run_nodes(factories: Iterable[Callable[[], Any]], args: list[str] | None = N
         print(f'error: {exc}', file=sys.stderr, flush=True)
         status = 2
     finally:
+        BUS.reset()
         for node in reversed(nodes):
             close = getattr(node, 'close', None)
             if callable(close):

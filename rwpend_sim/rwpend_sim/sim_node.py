@@ -31,7 +31,7 @@ from rwpend_msgs.srv import Disturb
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, declare_rig,
-                               diagnostic_status, run_node)
+                               diagnostic_status, local_subscription, run_node)
 from rwpend_sim.sim_core import SimCore
 
 PARAMS = {
@@ -101,7 +101,8 @@ class SimNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
-        self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL, raw=True)
+        # also taken directly from a controller in this process (composed mode, rwpend_ros.intra)
+        local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL)
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
         self.create_service(SetBool, '~/estop', self.on_estop_service)

@@ -1,0 +1,122 @@
+"""In-process delivery of wire bytes between nodes of ONE process (composed mode), the rclpy
+counterpart of rclcpp's intra-process communication. Pure: no rclpy import (the rclpy glue is
+:func:`rwpend_ros.common.local_publisher` / :func:`rwpend_ros.common.local_subscription`).
+
+Why: between two nodes of one process a message still goes through DDS -- the publisher hands
+it to Fast DDS, whose listener queues an event, and the executor takes it after the
+publisher's callback has returned: ~120 us p50 per hop at 1 kHz, as much as a hop between
+processes (PERFORMANCE.md, 12.). Through the bus the subscriber's callback runs inside
+``publish()``, before the DDS write.
+
+Rules (what keeps it safe):
+
+* only on the executor's thread (:attr:`LocalBus.thread`, set by ``run_nodes`` once the nodes
+  are built; None = off): a publish from another thread (the simulator's real-time sample
+  loop) goes through DDS as before, so a node's callbacks still run on one thread only;
+* a local subscriber whose callback is running already (on the stack, further up) is not
+  entered again: the message then takes the DDS path like any other;
+* the message is published on DDS too, after the local delivery: other processes (the
+  recorder, a monitor) see exactly what they saw before;
+* the DDS copy of a message the subscriber already got through the bus is dropped by its DDS
+  callback (same bytes as one of the last :data:`KEEP` delivered locally); a message from
+  another process is delivered as before;
+* ``RWPEND_INTRA_PROCESS=0`` turns the bus off (for comparisons).
+
+Only topics whose subscriber opts in use it (``state`` -> controller, ``command`` -> simulator),
+and no callback reached through it publishes on a bus topic the chain came from, so a local
+delivery never cycles.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from collections import deque
+from typing import Callable
+
+#: how many locally delivered messages per subscription wait for their DDS copy
+KEEP = 64
+
+
+class _LocalSub:
+    __slots__ = ('callback', 'pending', 'active', 'delivered', 'duplicates')
+
+    def __init__(self, callback: Callable[[bytes], None]) -> None:
+        self.callback = callback
+        self.pending: deque[bytes] = deque(maxlen=KEEP)   # delivered locally, DDS copy not seen yet
+        self.active = False          # its callback is running (on the executor's thread)
+        self.delivered = 0           # messages delivered through the bus
+        self.duplicates = 0          # DDS copies dropped
+
+    def run(self, data: bytes) -> None:
+        self.active = True
+        try:
+            self.callback(data)
+        finally:
+            self.active = False
+
+    def from_dds(self, data: bytes) -> None:
+        """The DDS subscription's callback: drops the copy of a message the bus delivered."""
+        p = self.pending
+        if p and data in p:
+            # DDS keeps a publisher's order: the copies of the older pending messages will not
+            # come any more (a keep-last reader dropped them), so they go too
+            while p.popleft() != data:
+                pass
+            self.duplicates += 1
+            return
+        self.run(data)
+
+
+class LocalBus:
+    """The process's registry of local subscriptions, by fully qualified topic name."""
+
+    def __init__(self, enabled: bool | None = None) -> None:
+        if enabled is None:
+            enabled = os.environ.get('RWPEND_INTRA_PROCESS', '1') != '0'
+        self.enabled = enabled
+        #: ident of the executor's thread; None until run_nodes starts spinning (bus off)
+        self.thread: int | None = None
+        self.topics: dict[str, list[_LocalSub]] = {}
+
+    def subscribe(self, topic: str, callback: Callable[[bytes], None]) -> _LocalSub:
+        """Register ``callback`` for ``topic``; give the returned object's ``from_dds`` to the
+        DDS subscription as its callback."""
+        sub = _LocalSub(callback)
+        self.topics.setdefault(topic, []).append(sub)
+        return sub
+
+    def unsubscribe(self, topic: str, sub: _LocalSub) -> None:
+        subs = self.topics.get(topic, [])
+        if sub in subs:
+            subs.remove(sub)
+        if not subs:
+            self.topics.pop(topic, None)
+
+    def local(self, topic: str) -> list[_LocalSub]:
+        """The subscriptions a publish on ``topic`` from this thread delivers to directly."""
+        if not self.enabled or self.thread is None:
+            return []
+        subs = self.topics.get(topic)
+        if not subs or threading.get_ident() != self.thread:
+            return []
+        return [s for s in subs if not s.active]
+
+    def publish(self, topic: str, data: bytes, dds_publish: Callable[[bytes], None]) -> None:
+        """Deliver ``data`` to the local subscribers of ``topic`` (in their callbacks, now), then
+        publish it on DDS with ``dds_publish``."""
+        try:
+            for sub in self.local(topic):
+                sub.pending.append(data)
+                sub.delivered += 1
+                sub.run(data)
+        finally:   # whatever a local callback did, the message goes out on DDS (recorded)
+            dds_publish(data)
+
+    def reset(self) -> None:
+        """Off, and no subscription (run_nodes, when its nodes are destroyed)."""
+        self.thread = None
+        self.topics.clear()
+
+
+#: the bus of this process
+BUS = LocalBus()

@@ -1,0 +1,98 @@
+"""The in-process bus (rwpend_ros.intra): pure, no rclpy."""
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from rwpend_ros.intra import KEEP, LocalBus
+
+
+def make_bus():
+    bus = LocalBus(enabled=True)
+    bus.thread = threading.get_ident()
+    return bus
+
+
+def test_local_delivery_runs_before_the_dds_write_and_the_dds_copy_is_dropped():
+    bus = make_bus()
+    order = []
+    sub = bus.subscribe('/r/state', lambda d: order.append(('local', d)))
+    bus.publish('/r/state', b'a', lambda d: order.append(('dds', d)))
+    assert order == [('local', b'a'), ('dds', b'a')]
+    sub.from_dds(b'a')                         # its DDS copy: not delivered again
+    assert order == [('local', b'a'), ('dds', b'a')] and sub.duplicates == 1 and sub.delivered == 1
+    sub.from_dds(b'x')                         # from another process: delivered
+    assert order[-1] == ('local', b'x')
+
+
+def test_dropped_copies_are_forgotten_in_order():
+    bus = make_bus()
+    got = []
+    sub = bus.subscribe('/t', got.append)
+    for m in (b'1', b'2', b'3'):
+        bus.publish('/t', m, lambda d: None)
+    sub.from_dds(b'3')            # the copies of 1 and 2 were dropped by a keep-last reader
+    assert not sub.pending
+    sub.from_dds(b'1')            # a remote message equal to an old one: delivered
+    assert got == [b'1', b'2', b'3', b'1']
+    for i in range(KEEP + 10):    # copies that never come: bounded
+        bus.publish('/t', str(i).encode(), lambda d: None)
+    assert len(sub.pending) == KEEP
+
+
+def test_off_outside_the_executor_thread_and_when_disabled():
+    for bus in (LocalBus(enabled=True), LocalBus(enabled=False)):   # thread unset / disabled
+        bus.thread = threading.get_ident() if not bus.enabled else None
+        got, dds = [], []
+        bus.subscribe('/t', got.append)
+        bus.publish('/t', b'm', dds.append)
+        assert got == [] and dds == [b'm']
+    bus = make_bus()
+    got, dds = [], []
+    bus.subscribe('/t', got.append)
+    t = threading.Thread(target=bus.publish, args=('/t', b'm', dds.append))
+    t.start()
+    t.join()
+    assert got == [] and dds == [b'm'], 'another thread (the sample loop) goes through DDS'
+
+
+def test_a_running_callback_is_not_entered_again():
+    bus = make_bus()
+    got = []
+
+    def cb(d):
+        got.append(d)
+        if d == b'first':
+            bus.publish('/t', b'nested', lambda _: None)   # would re-enter cb: DDS path
+    sub = bus.subscribe('/t', cb)
+    bus.publish('/t', b'first', lambda _: None)
+    assert got == [b'first']
+    sub.from_dds(b'nested')       # arrives through DDS, once
+    assert got == [b'first', b'nested']
+
+
+def test_the_dds_write_happens_even_when_a_local_callback_raises():
+    bus = make_bus()
+    dds = []
+
+    def bad(_):
+        raise RuntimeError('law fault')
+    sub = bus.subscribe('/t', bad)
+    with pytest.raises(RuntimeError):
+        bus.publish('/t', b'm', dds.append)
+    assert dds == [b'm'] and not sub.active
+
+
+def test_topics_are_separate_and_unsubscribe():
+    bus = make_bus()
+    a, b = [], []
+    sa = bus.subscribe('/ns1/state', a.append)
+    bus.subscribe('/ns2/state', b.append)
+    bus.publish('/ns1/state', b'1', lambda _: None)
+    assert a == [b'1'] and b == []
+    bus.unsubscribe('/ns1/state', sa)
+    bus.publish('/ns1/state', b'2', lambda _: None)
+    assert a == [b'1']
+    bus.reset()
+    assert bus.thread is None and not bus.topics
