@@ -1,0 +1,61 @@
+"""rwpend_ros.common.LocalPublisher / local_subscription with real rclpy nodes: the in-process
+bus (rwpend_ros.intra) delivers wire bytes and message objects (serialized) to a subscriber of
+another node of the process, on the executor's thread only."""
+from __future__ import annotations
+
+import os
+import random
+import threading
+
+import pytest
+import rclpy
+from rclpy.node import Node
+
+from rwpend_msgs.msg import MotorCommand
+from rwpend_ros import wire
+from rwpend_ros.common import QOS_CONTROL, QOS_CONTROL_PUB, LocalPublisher, local_subscription
+from rwpend_ros.intra import BUS
+from rwpend_ros.transport import apply_transport
+
+
+@pytest.fixture
+def nodes(monkeypatch):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    apply_transport(env)                             # as every rwpend process: UDP on localhost
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=random.SystemRandom().randint(100, 230))
+    a = Node('pub_side', namespace='/intra_test', context=ctx)
+    b = Node('sub_side', namespace='/intra_test', context=ctx)
+    yield a, b
+    BUS.reset()
+    a.destroy_node()
+    b.destroy_node()
+    rclpy.shutdown(context=ctx)
+
+
+def test_bytes_and_objects_reach_the_local_subscriber(nodes):
+    a, b = nodes
+    got = []
+    sub = local_subscription(b, MotorCommand, 'command', got.append, QOS_CONTROL)
+    pub = LocalPublisher(a, MotorCommand, 'command', QOS_CONTROL_PUB)
+    assert pub.topic == sub.topic_name == '/intra_test/command'
+    assert pub.get_subscription_count() >= 0          # the rclpy publisher's API is there
+    BUS.thread = threading.get_ident()
+    header = wire.pack_header(3, 4, 'rwpend')
+    pub.publish(wire.pack_command(header, 7, 1.5))
+    msg = MotorCommand(seq=8, u=-2.0)
+    msg.header.frame_id = 'rwpend'
+    pub.publish(msg)                                 # e.g. the controller's watchdog zero
+    assert [wire.unpack_command(d) for d in got] == [(7, 1.5), (8, -2.0)]
+
+
+def test_nothing_local_before_the_executor_runs(nodes):
+    a, b = nodes
+    got = []
+    local_subscription(b, MotorCommand, 'command', got.append, QOS_CONTROL)
+    pub = LocalPublisher(a, MotorCommand, 'command', QOS_CONTROL_PUB)
+    BUS.thread = None
+    pub.publish(MotorCommand(seq=1, u=0.0))
+    assert got == []                                 # DDS only (nobody spins here)
