@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from rwpend_bag.analysis import _decode, analyze, wrap
 from rwpend_bag.reader import read_bag
@@ -19,7 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
 
 
-def test_stack_on_the_emulated_rig_swings_up_and_balances(tmp_path, ros_env):
+@pytest.mark.parametrize('layout', [[], ['--composed', 'control']], ids=['separate', 'composed_control'])
+def test_stack_on_the_emulated_rig_swings_up_and_balances(tmp_path, ros_env, layout):
     link = tmp_path / 'rig'
     bag = tmp_path / 'serial_run'
     emu_log = open(tmp_path / 'emulator.log', 'w')
@@ -31,7 +33,7 @@ def test_stack_on_the_emulated_rig_swings_up_and_balances(tmp_path, ros_env):
             time.sleep(0.1)
         assert link.exists(), 'the emulator did not create its link'
         p = subprocess.run([RWPEND, 'up', '--plant', f'serial:{link}', '--mode', 'auto',
-                            '--duration', '14', '--record', str(bag), '--rt-priority', '50'],
+                            '--duration', '14', '--record', str(bag), '--rt-priority', '50', *layout],
                            env=ros_env, capture_output=True, text=True, timeout=120)
         assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     finally:
