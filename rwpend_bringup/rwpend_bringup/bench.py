@@ -5,7 +5,8 @@ from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` r
 ``--rt-priority 50`` unless told otherwise):
 
 1. **real time**, for each sample period h (default 1 ms and 0.5 ms) and each layout (separate
-   processes, and ``--composed``: plant, estimator and controller in one process): simulator on
+   processes; ``control``: estimator and controller in one process, ``up --composed control``;
+   ``composed``: plant, estimator and controller in one process, ``up --composed``): simulator on
    the wall clock, estimator, controller in ``auto`` (swing-up, catch, balance), recorder. The
    measured window opens ``SETTLE_S`` s after the start (the loop is running by then) and lasts
    ``--duration`` s (default 60). From the bag, over the samples whose instant lies in the window:

@@ -72,6 +72,8 @@ class LocalPublisher:
         BUS.publish(self.topic, bytes(msg), self.pub.publish)
 
     def __getattr__(self, name):
+        if name == 'pub':           # not built (the publisher's creation failed)
+            raise AttributeError(name)
         return getattr(self.pub, name)
 
 
