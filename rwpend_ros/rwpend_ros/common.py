@@ -77,13 +77,15 @@ class LocalPublisher:
         return getattr(self.pub, name)
 
 
-def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], None], qos):
+def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], None], qos,
+                       before_dds: bool = True):
     """A raw subscription (``callback`` takes wire bytes) that also takes the messages of a
     :class:`LocalPublisher` of another node of this process directly, without the DDS hop
-    (:mod:`rwpend_ros.intra`; the DDS copy of those is dropped). Returns the rclpy subscription."""
+    (:mod:`rwpend_ros.intra`; the DDS copy of those is dropped); ``before_dds`` see
+    :meth:`rwpend_ros.intra.LocalBus.subscribe`. Returns the rclpy subscription."""
     holder = []
     sub = node.create_subscription(msg_type, topic, lambda data: holder[0].from_dds(data), qos, raw=True)
-    holder.append(BUS.subscribe(sub.topic_name, callback))
+    holder.append(BUS.subscribe(sub.topic_name, callback, before_dds))
     return sub
 
 

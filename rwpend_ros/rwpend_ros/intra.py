@@ -38,10 +38,11 @@ KEEP = 64
 
 
 class _LocalSub:
-    __slots__ = ('callback', 'pending', 'active', 'delivered', 'duplicates')
+    __slots__ = ('callback', 'before_dds', 'pending', 'active', 'delivered', 'duplicates')
 
-    def __init__(self, callback: Callable[[bytes], None]) -> None:
+    def __init__(self, callback: Callable[[bytes], None], before_dds: bool = True) -> None:
         self.callback = callback
+        self.before_dds = before_dds  # delivered before the DDS write (else right after it)
         self.pending: deque[bytes] = deque(maxlen=KEEP)   # delivered locally, DDS copy not seen yet
         self.active = False          # its callback is running (on the executor's thread)
         self.delivered = 0           # messages delivered through the bus
@@ -78,10 +79,12 @@ class LocalBus:
         self.thread: int | None = None
         self.topics: dict[str, list[_LocalSub]] = {}
 
-    def subscribe(self, topic: str, callback: Callable[[bytes], None]) -> _LocalSub:
+    def subscribe(self, topic: str, callback: Callable[[bytes], None], before_dds: bool = True) -> _LocalSub:
         """Register ``callback`` for ``topic``; give the returned object's ``from_dds`` to the
-        DDS subscription as its callback."""
-        sub = _LocalSub(callback)
+        DDS subscription as its callback. ``before_dds``: called before the message is written
+        to DDS (the shortest path), else right after it (the DDS readers, in this process too,
+        then get the message before anything the callback publishes)."""
+        sub = _LocalSub(callback, before_dds)
         self.topics.setdefault(topic, []).append(sub)
         return sub
 
@@ -104,13 +107,25 @@ class LocalBus:
     def publish(self, topic: str, data: bytes, dds_publish: Callable[[bytes], None]) -> None:
         """Deliver ``data`` to the local subscribers of ``topic`` (in their callbacks, now), then
         publish it on DDS with ``dds_publish``."""
+        subs = self.local(topic)
+        if not subs:
+            dds_publish(data)
+            return
+        # the DDS copies are taken by the executor, i.e. after this returns: marking a message
+        # as delivered before or after the DDS write is the same
         try:
-            for sub in self.local(topic):
+            for sub in subs:
+                if sub.before_dds:
+                    sub.pending.append(data)
+                    sub.delivered += 1
+                    sub.run(data)
+        finally:   # whatever a local callback did, the message goes out on DDS (recorded)
+            dds_publish(data)
+        for sub in subs:   # not reached when a callback above raised: DDS delivers to these
+            if not sub.before_dds and not sub.active:
                 sub.pending.append(data)
                 sub.delivered += 1
                 sub.run(data)
-        finally:   # whatever a local callback did, the message goes out on DDS (recorded)
-            dds_publish(data)
 
     def reset(self) -> None:
         """Off, and no subscription (run_nodes, when its nodes are destroyed)."""

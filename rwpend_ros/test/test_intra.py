@@ -96,3 +96,26 @@ def test_topics_are_separate_and_unsubscribe():
     assert a == [b'1']
     bus.reset()
     assert bus.thread is None and not bus.topics
+
+
+def test_after_dds_subscribers_run_after_the_write():
+    bus = make_bus()
+    order = []
+    bus.subscribe('/t', lambda d: order.append('after'), before_dds=False)
+    bus.subscribe('/t', lambda d: order.append('before'))
+    bus.publish('/t', b'm', lambda d: order.append('dds'))
+    assert order == ['before', 'dds', 'after']
+
+
+def test_after_dds_subscriber_gets_the_dds_copy_when_a_callback_raised():
+    bus = make_bus()
+    got = []
+    late = bus.subscribe('/t', got.append, before_dds=False)
+
+    def bad(_):
+        raise RuntimeError('fault')
+    bus.subscribe('/t', bad)
+    with pytest.raises(RuntimeError):
+        bus.publish('/t', b'm', lambda d: None)
+    late.from_dds(b'm')           # not delivered locally: its DDS copy is not dropped
+    assert got == [b'm']

@@ -101,8 +101,10 @@ class SimNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
-        # also taken directly from a controller in this process (composed mode, rwpend_ros.intra)
-        local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL)
+        # also taken directly from a controller in this process (composed mode, rwpend_ros.intra),
+        # after the command is written to DDS: an estimator of this process then has command k
+        # (through DDS) before the sample k+1 this callback publishes in lockstep
+        local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL, before_dds=False)
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
