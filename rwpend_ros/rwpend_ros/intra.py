@@ -6,7 +6,10 @@ Why: between two nodes of one process a message still goes through DDS -- the pu
 it to Fast DDS, whose listener queues an event, and the executor takes it after the
 publisher's callback has returned: ~120 us p50 per hop at 1 kHz, as much as a hop between
 processes (PERFORMANCE.md, 12.). Through the bus the subscriber's callback runs inside
-``publish()``, before the DDS write.
+``publish()``: before the DDS write (``state`` -> controller: the shortest path), or right
+after it (``command`` -> simulator: an estimator of the process then has command k, through
+DDS, before the sample k+1 the simulator publishes in lockstep -- the order of separate
+processes).
 
 Rules (what keeps it safe):
 
@@ -105,8 +108,9 @@ class LocalBus:
         return [s for s in subs if not s.active]
 
     def publish(self, topic: str, data: bytes, dds_publish: Callable[[bytes], None]) -> None:
-        """Deliver ``data`` to the local subscribers of ``topic`` (in their callbacks, now), then
-        publish it on DDS with ``dds_publish``."""
+        """Deliver ``data`` to the local subscribers of ``topic`` (in their callbacks, now) and
+        publish it on DDS with ``dds_publish``: the ``before_dds`` subscribers first, then the
+        DDS write, then the others."""
         subs = self.local(topic)
         if not subs:
             dds_publish(data)
