@@ -32,7 +32,8 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
     rt = res['realtime'][0]
     for key in ('layout', 'h_s', 'rate_hz', 'samples', 'latency_us', 'late_fraction',
                 'plant_late_fraction', 'jitter_us', 'period_us', 'dropped', 'cpu_cores',
-                'cpu_cores_total', 'other_cpu_cores', 'loadavg_before', 'exit_codes'):
+                'cpu_cores_total', 'other_cpu_cores', 'loadavg_before', 'exit_codes',
+                'host_steal_pct', 'cpu_latency_request'):
         assert key in rt, key
     assert rt['samples'] > 0 and rt['rate_hz'] == 1000
     for key in ('p50', 'p99', 'p99.9', 'max'):
@@ -41,6 +42,7 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
     assert set(rt['dropped']) >= {'/bench/encoders', '/bench/command'}
     assert all(c in (0, -2, 130) for c in rt['exit_codes'].values()), rt['exit_codes']
 
+    assert rt['cpu_latency_request'] == 'none' and res['settings']['cpu_latency_us'] is None
     assert [r['recorder'] for r in res['lockstep']] == [False, True]
     for r in res['lockstep']:
         for key in ('simulated_s', 'wall_s', 'sim_per_wall', 'cpu_s_per_simulated_s'):

@@ -29,7 +29,9 @@ from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` r
    * dropped messages per topic -- seq gaps seen by the recorder (``recording_report.json``);
    * CPU per process -- ``/proc/PID/stat`` utime+stime over the window, in cores (1.0 = one core
      busy); and the CPU of every *other* process on the host in the same window
-     (``other_cpu_cores``: the figures of a shared machine depend on it), plus the load average.
+     (``other_cpu_cores``: the figures of a shared machine depend on it), plus the load average
+     and the host's steal time (``host_steal_pct``, /proc/stat: on a VM, the share of CPU time the
+     hypervisor gave to other guests -- the cause of most bad runs on our 2-vCPU test machine).
 
 2. **lockstep** throughput (simulated s per wall s) of the full pipeline, with and without the
    recorder, from the simulator's own "N s simulated in M s wall" report, and the CPU seconds of
@@ -129,6 +131,27 @@ def all_cpu_snapshot() -> dict[int, float]:
     return out
 
 
+def cpu_times() -> list[int] | None:
+    """The host's CPU time counters (``/proc/stat``, all CPUs: user nice system idle iowait irq
+    softirq steal ...), in clock ticks; None where unreadable."""
+    try:
+        with open('/proc/stat') as f:
+            return [int(x) for x in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+
+
+def steal_percent(before: list[int] | None, after: list[int] | None) -> float | None:
+    """Share (%) of the CPU time of the window that the hypervisor gave to other guests
+    ("steal", the 8th counter of /proc/stat): a VM whose vCPUs wait for the host runs everything
+    late, whatever the stack does. None without the counters or on a bare machine that has none."""
+    if not before or not after or len(before) < 8 or len(after) < 8:
+        return None
+    d = [b - a for a, b in zip(before, after)]
+    total = sum(d[:8])     # guest time is counted in user already
+    return round(100.0 * d[7] / total, 2) if total > 0 else None
+
+
 def other_cpu_cores(before: dict[int, float], after: dict[int, float], ours: set[int],
                     window: float) -> float | None:
     """CPU (cores) used during the window by processes other than the benchmark's (a lower bound:
@@ -189,6 +212,26 @@ def _stack(up_args: list[str]):
     return a, specs, files
 
 
+class _NoRequest:
+    status = 'none'
+    active = False
+
+    def close(self) -> None:
+        pass
+
+
+def _cpu_latency_request(a):
+    """The ``--cpu-latency`` PM QoS request of a run (what ``rwpend up`` holds for its stack),
+    held by the benchmark while the run's launcher runs; a no-op without the option."""
+    if getattr(a, 'cpu_latency', None) is None:
+        return _NoRequest()
+    from rwpend_ros.sched import CpuLatencyRequest
+    req = CpuLatencyRequest(a.cpu_latency)
+    if not req.active:
+        print(f'rwpend bench: CPU wake-up latency request {req.status}', file=sys.stderr, flush=True)
+    return req
+
+
 def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
                  ns: str, echo=None, up_extra=(), spec_hook=None, tag: str | None = None) -> dict:
     tag = tag or f'rt_{layout}_h{h * 1e6:g}us'
@@ -204,20 +247,24 @@ def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
     env, trace_dir = _with_trace(env, out / f'{tag}.trace')
     launcher = Launcher(specs, namespace=a.ns, params_files=files, env=env, out=log)
     load0 = _loadavg()
+    cpu_req = _cpu_latency_request(a)
     try:
         launcher.start()
         # the loop starts once every node is up and connected (the simulator holds sample 0 until
         # the estimator and the recorder listen): the measured window opens SETTLE_S s later
         reason = launcher.wait(SETTLE_S)
         a0 = all_cpu_snapshot()
+        s0 = cpu_times()
         t0, w0, c0 = time.monotonic(), time.time_ns(), cpu_snapshot(launcher)
         if reason == 'duration':
             reason = launcher.wait(duration)
         t1, w1, c1 = time.monotonic(), time.time_ns(), cpu_snapshot(launcher)
+        s1 = cpu_times()
         a1 = all_cpu_snapshot()
         ours = {os.getpid(), *(p.pid for p in launcher.procs.values())}
     finally:
         codes = launcher.stop()
+        cpu_req.close()
         log.close()
     window = t1 - t0
     cpu = {n: (None if c0[n] is None or c1[n] is None else round((c1[n] - c0[n]) / window, 4))
@@ -226,7 +273,8 @@ def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
            'stop_reason': reason, 'exit_codes': codes, 'bag': str(bag), 'log': str(out / f'{tag}.log'),
            'loadavg_before': load0, 'loadavg_after': _loadavg(),
            'other_cpu_cores': other_cpu_cores(a0, a1, ours, window),
-           'other_cpu_source': 'CPU of every other process on the host during the window (lower bound)'}
+           'other_cpu_source': 'CPU of every other process on the host during the window (lower bound)',
+           'host_steal_pct': steal_percent(s0, s1), 'cpu_latency_request': cpu_req.status}
     res['cpu_cores'] = cpu
     res['cpu_cores_total'] = round(sum(v for v in cpu.values() if v is not None), 4)
     res['cpu_window_s'] = round(window, 3)
@@ -423,6 +471,8 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
     t0 = time.monotonic()
     load0 = _loadavg()
     polls: list[tuple[float, dict]] = []    # (time, CPU s per node), every 50 ms
+    cpu_req = _cpu_latency_request(a)
+    s0 = cpu_times()
     try:
         launcher.start()
         reason = 'duration'
@@ -433,7 +483,9 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
             polls.append((time.monotonic(), snap))
             reason = launcher.wait(0.05)
     finally:
+        s1 = cpu_times()
         codes = launcher.stop()
+        cpu_req.close()
         log.close()
     total = time.monotonic() - t0
     simulated = wall = t_end = None
@@ -445,7 +497,8 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
            'wall_s': wall, 'sim_per_wall': None if not wall else round(simulated / wall, 3),
            'total_wall_s': round(total, 2), 'stop_reason': reason, 'exit_codes': codes,
            'log': str(out / f'{tag}.log'), 'bag': str(bag) if record else None,
-           'loadavg_before': load0, 'loadavg_after': _loadavg()}
+           'loadavg_before': load0, 'loadavg_after': _loadavg(),
+           'host_steal_pct': steal_percent(s0, s1), 'cpu_latency_request': cpu_req.status}
     # CPU of each process over the run (sample 0 to the end), from the 50 ms polls
     if wall and t_end is not None and polls:
         def at(t):
@@ -489,13 +542,16 @@ def summary_text(res: dict) -> str:
              f"machine: {m['cpus']} CPU ({m['cpu_model']}), Python {m['python']}, {m['rmw']}, executor "
              f"{m['executor']}, transport {m.get('transport', 'udp')}; "
              f"load average {m.get('loadavg_start')} -> {m.get('loadavg_end')}",
-             f"settings: rt priority {st.get('rt_priority')}, {st['duration_s']:g} s real time, "
+             f"settings: rt priority {st.get('rt_priority')}, CPU wake-up latency request "
+             f"{'none' if st.get('cpu_latency_us') is None else str(st['cpu_latency_us']) + ' us'}, "
+             f"{st['duration_s']:g} s real time, "
              f"{st['lockstep_duration_s']:g} s lockstep"]
     if res['realtime']:
         lines.append('real time (recorder running). latency = sample instant -> command at the recorder '
                      '(us); late = command k after sample k+1')
         lines.append(f"  {'layout':<9} {'rate':>6} {'samples':>8} {'lat p50':>8} {'p99':>7} {'p99.9':>7} "
-                     f"{'max':>7} {'late%':>7} {'plant%':>7} {'jit p99':>8} {'dropped':>8} {'CPU':>5} {'other':>6}")
+                     f"{'max':>7} {'late%':>7} {'plant%':>7} {'jit p99':>8} {'dropped':>8} {'CPU':>5} {'other':>6} "
+                     f"{'steal%':>6}")
         for r in res['realtime']:
             lat = r.get('latency_us') or {}
             jit = r.get('jitter_us') or {}
@@ -507,7 +563,7 @@ def summary_text(res: dict) -> str:
                 f"{_fmt(None if late is None else 100 * late, 3):>7} "
                 f"{_fmt(None if plate is None else 100 * plate, 3):>7} {_fmt(jit.get('p99')):>8} "
                 f"{sum(drops) if drops else 'n/a':>8} {_fmt(r.get('cpu_cores_total'), 2):>5} "
-                f"{_fmt(r.get('other_cpu_cores'), 2):>6}")
+                f"{_fmt(r.get('other_cpu_cores'), 2):>6} {_fmt(r.get('host_steal_pct'), 1):>6}")
             pl = r.get('plant_latency_us')
             if pl:
                 pr = r.get('plant_rx_late_fraction')
@@ -524,7 +580,8 @@ def summary_text(res: dict) -> str:
             lines.append(f"  {r['layout']:<9} h={r['h_s'] * 1e3:g} ms  recorder "
                          f"{'yes' if r['recorder'] else 'no ':<3}  {_fmt(r['simulated_s'], 1)} s in "
                          f"{_fmt(r['wall_s'], 2)} s = {_fmt(r['sim_per_wall'], 2)}x real time, CPU "
-                         f"{_fmt(r.get('cpu_s_per_simulated_s'), 2)} s/s; load {r.get('loadavg_before')}")
+                         f"{_fmt(r.get('cpu_s_per_simulated_s'), 2)} s/s; load {r.get('loadavg_before')}; "
+                         f"host steal {_fmt(r.get('host_steal_pct'), 1)} %")
             if r.get('stages_us'):
                 lines.append(f"            step p50 {_fmt((r.get('step_us') or {}).get('p50'))} us; stages p50/p99 (us): "
                              + _stages_text(r['stages_us']))
@@ -578,6 +635,8 @@ def _parser() -> argparse.ArgumentParser:
                    help='./rwpend up --set of the runs (repeatable), e.g. sim.wake_early_us=100')
     p.add_argument('--cpus', default=None, metavar='LOOP[:RECORDER]',
                    help='./rwpend up --cpus of the runs (CPU affinity), e.g. 1:0')
+    p.add_argument('--cpu-latency', default=None, metavar='US|none',
+                   help='./rwpend up --cpu-latency of the runs (PM QoS CPU wake-up latency)')
     p.add_argument('--json', action='store_true', help='print the JSON instead of the summary')
     return p
 
@@ -615,6 +674,9 @@ def main(argv=None) -> int:
     up_extra = ['--rt-priority', str(a.rt_priority), *(x for v in a.set for x in ('--set', v))]
     if a.cpus:
         up_extra += ['--cpus', a.cpus]
+    cpu_latency = None if str(a.cpu_latency).lower() == 'none' else a.cpu_latency
+    if cpu_latency is not None:
+        up_extra += ['--cpu-latency', str(cpu_latency)]
     try:
         _stack(up_extra)      # refuse bad --set / --cpus before any run
     except (ValueError, SystemExit) as exc:
@@ -626,6 +688,7 @@ def main(argv=None) -> int:
                         'layouts': list(layouts), 'domain_id': int(env['ROS_DOMAIN_ID']),
                         'namespace': a.ns, 'quick': a.quick, 'rt_priority': a.rt_priority,
                         'set': list(a.set), 'cpus': a.cpus,
+                        'cpu_latency_us': None if cpu_latency is None else int(cpu_latency),
                         'command': 'rwpend bench ' + ' '.join(sys.argv[1:] if argv is None else argv)},
            'realtime': [], 'lockstep': [], 'decode': None}
     say = (lambda s: print(s, file=sys.stderr, flush=True))

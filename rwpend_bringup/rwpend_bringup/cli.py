@@ -135,6 +135,11 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='SCHED_FIFO priority N (1-99) for the loop processes (plant, estimator, '
                    'controller), N-10 for the recorder; falls back to nice -10 where real-time '
                    'scheduling is not permitted (default 0: ordinary scheduling); see PERFORMANCE.md')
+    p.add_argument('--cpu-latency', type=int, default=None, metavar='US',
+                   help='while the stack runs, ask the kernel (PM QoS, /dev/cpu_dma_latency) to keep '
+                   'idle CPUs in states that wake within US microseconds; 0 = idle CPUs poll, the '
+                   'fastest wake-up, at the cost of spinning CPUs. Needs root (else a warning, no '
+                   'request); default: no request; see PERFORMANCE.md')
     p.add_argument('--cpus', default=None, metavar='LOOP[:RECORDER]',
                    help='CPU affinity: the loop processes (plant, estimator, controller) on the CPUs '
                    'LOOP (e.g. 1 or 0,1), the recorder on RECORDER if given (e.g. --cpus 1:0); '
@@ -247,6 +252,9 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     if prio:
         for s in specs:
             s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - 10) if s.name == 'recorder' else prio)
+    lat = getattr(a, 'cpu_latency', None)
+    if lat is not None and lat < 0:
+        raise ValueError(f'--cpu-latency must be >= 0 (µs), got {lat}')
     cpus = getattr(a, 'cpus', None)
     if cpus:
         loop, _, rec = cpus.partition(':')
@@ -287,6 +295,17 @@ def run_stack(a, specs, files, on_started=None) -> int:
     print(f'rwpend: starting {names} in {a.ns} (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}, '
           f'discovery {discovery_range()}, transport {transport_choice()})',
           flush=True)
+    lat = getattr(a, 'cpu_latency', None)
+    if lat is None:
+        return _run_launcher(a, launcher, on_started)
+    from rwpend_ros.sched import CpuLatencyRequest
+    with CpuLatencyRequest(lat) as req:     # held by this process until the stack has stopped
+        print(f'rwpend: CPU wake-up latency request: {req.status}', flush=True,
+              file=sys.stdout if req.active else sys.stderr)
+        return _run_launcher(a, launcher, on_started)
+
+
+def _run_launcher(a, launcher, on_started) -> int:
     if a.plant == 'sim':
         # the simulator exits by itself after --duration s from its sample 0 (simulated time in
         # lockstep); the wall-clock bound only catches a stack that never starts

@@ -60,3 +60,17 @@ def test_bad_composed_value_refused(capsys):
     with pytest.raises(SystemExit):
         specs_of('--composed', 'everything')
     assert 'invalid choice' in capsys.readouterr().err
+
+
+def test_cpu_latency_is_validated_before_anything_starts():
+    with pytest.raises(ValueError, match='--cpu-latency'):
+        specs_of('--cpu-latency', '-1')
+    specs_of('--cpu-latency', '0')      # accepted (the request itself is made by run_stack)
+
+
+def test_cpu_latency_must_be_an_integer(capsys):
+    p = Parser(prog='rwpend up')
+    add_stack_args(p)
+    with pytest.raises(SystemExit) as e:
+        p.parse_args(['--cpu-latency', 'fast'])
+    assert e.value.code == 2 and '--cpu-latency' in capsys.readouterr().err

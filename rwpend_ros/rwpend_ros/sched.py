@@ -46,3 +46,58 @@ def apply_scheduling(environ: Mapping[str, str] | None = None) -> dict:
         except (OSError, ValueError, AttributeError) as exc:
             done['cpus'] = f'not permitted ({exc})'
     return done
+
+
+#: The kernel's PM QoS interface for the CPU wake-up latency (Documentation/power/pm_qos_interface.rst).
+CPU_DMA_LATENCY = '/dev/cpu_dma_latency'
+
+
+class CpuLatencyRequest:
+    """Hold a PM QoS request for the CPUs' wake-up latency while the stack runs.
+
+    An idle CPU waits in an idle state (``halt``, C-states) and takes time to wake up when a
+    message arrives; on this project's 2-vCPU VM a wake-up costs ~30-60 µs at the median, and a
+    loop sample wakes four threads in turn (PERFORMANCE.md, 13.). Writing ``us`` to
+    ``/dev/cpu_dma_latency`` and keeping the file open tells the cpuidle governor to use only
+    idle states that wake up within ``us`` microseconds; 0 keeps an idle CPU polling (the
+    setting ``cyclictest`` and real-time Linux guides use). The request ends when the file is
+    closed (:meth:`close`, or the process exits), so nothing outlives the stack.
+
+    The cost: an idle CPU keeps spinning (power, heat; on a VM, host CPU). Needs the right to
+    open the device (root, or a udev rule); where that is missing, or the kernel has no cpuidle,
+    the request is not made and :attr:`status` says why -- never an error.
+    """
+
+    def __init__(self, us: int, path: str = CPU_DMA_LATENCY) -> None:
+        if not (isinstance(us, int) and 0 <= us <= 2_000_000_000):
+            raise ValueError(f'CPU wake-up latency must be an integer >= 0 (µs), got {us!r}')
+        self.us = us
+        self.fd: int | None = None
+        try:
+            fd = os.open(path, os.O_WRONLY)
+        except OSError as exc:
+            self.status = f'not made ({path}: {exc.strerror or exc})'
+            return
+        try:
+            os.write(fd, int(us).to_bytes(4, sys.byteorder, signed=True))
+        except OSError as exc:
+            os.close(fd)
+            self.status = f'not made (writing {path}: {exc.strerror or exc})'
+            return
+        self.fd = fd
+        self.status = f'{us} µs' + (' (idle CPUs poll)' if us == 0 else '')
+
+    @property
+    def active(self) -> bool:
+        return self.fd is not None
+
+    def close(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+    def __enter__(self) -> 'CpuLatencyRequest':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,42 @@
+"""Process scheduling helpers (pure): the PM QoS CPU wake-up latency request."""
+from __future__ import annotations
+
+import sys
+
+import pytest
+
+from rwpend_ros.sched import CpuLatencyRequest
+
+
+def test_request_writes_the_value_and_holds_the_file_until_closed(tmp_path):
+    dev = tmp_path / 'cpu_dma_latency'
+    dev.write_bytes(b'')
+    with CpuLatencyRequest(0, path=str(dev)) as req:
+        assert req.active and req.status.startswith('0 µs')
+        # what the kernel reads: one native s32
+        assert int.from_bytes(dev.read_bytes(), sys.byteorder, signed=True) == 0
+    assert not req.active
+    req.close()                      # closing twice is harmless
+
+
+def test_value_in_microseconds(tmp_path):
+    dev = tmp_path / 'cpu_dma_latency'
+    dev.write_bytes(b'')
+    req = CpuLatencyRequest(20, path=str(dev))
+    try:
+        assert int.from_bytes(dev.read_bytes(), sys.byteorder, signed=True) == 20
+        assert req.status == '20 µs'
+    finally:
+        req.close()
+
+
+def test_not_permitted_or_missing_is_a_status_not_an_error(tmp_path):
+    req = CpuLatencyRequest(0, path=str(tmp_path / 'missing'))
+    assert not req.active and req.status.startswith('not made') and 'missing' in req.status
+    req.close()
+
+
+@pytest.mark.parametrize('bad', [-1, 1.5, '0', None, 2**31])
+def test_bad_value_refused(bad, tmp_path):
+    with pytest.raises(ValueError, match='wake-up latency'):
+        CpuLatencyRequest(bad, path=str(tmp_path / 'x'))
