@@ -2,7 +2,7 @@
 
 What it runs (every run is the full stack started by :class:`rwpend_bringup.launch.Launcher`
 from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` runs, with
-``--rt-priority 50`` unless told otherwise):
+``--rt-priority 50 --cpu-latency 0`` unless told otherwise; PERFORMANCE.md 1. and 13.):
 
 1. **real time**, for each sample period h (default 1 ms and 0.5 ms) and each layout (separate
    processes; ``control``: estimator and controller in one process, ``up --composed control``;
@@ -635,8 +635,9 @@ def _parser() -> argparse.ArgumentParser:
                    help='./rwpend up --set of the runs (repeatable), e.g. sim.wake_early_us=100')
     p.add_argument('--cpus', default=None, metavar='LOOP[:RECORDER]',
                    help='./rwpend up --cpus of the runs (CPU affinity), e.g. 1:0')
-    p.add_argument('--cpu-latency', default=None, metavar='US|none',
-                   help='./rwpend up --cpu-latency of the runs (PM QoS CPU wake-up latency)')
+    p.add_argument('--cpu-latency', default='0', metavar='US|none',
+                   help='./rwpend up --cpu-latency of the runs (PM QoS CPU wake-up latency; '
+                   'default 0: idle CPUs poll while a run lasts; none = no request)')
     p.add_argument('--json', action='store_true', help='print the JSON instead of the summary')
     return p
 
