@@ -31,7 +31,8 @@ from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` r
      busy); and the CPU of every *other* process on the host in the same window
      (``other_cpu_cores``: the figures of a shared machine depend on it), plus the load average
      and the host's steal time (``host_steal_pct``, /proc/stat: on a VM, the share of CPU time the
-     hypervisor gave to other guests -- the cause of most bad runs on our 2-vCPU test machine).
+     hypervisor gave to other guests; our test VM also has slow spells that do not show as steal
+     -- the CPU per process, the same work, then rises by up to 50 %).
 
 2. **lockstep** throughput (simulated s per wall s) of the full pipeline, with and without the
    recorder, from the simulator's own "N s simulated in M s wall" report, and the CPU seconds of
