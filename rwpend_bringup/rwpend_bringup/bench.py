@@ -213,22 +213,12 @@ def _stack(up_args: list[str]):
     return a, specs, files
 
 
-class _NoRequest:
-    status = 'none'
-    active = False
-
-    def close(self) -> None:
-        pass
-
-
 def _cpu_latency_request(a):
     """The ``--cpu-latency`` PM QoS request of a run (what ``rwpend up`` holds for its stack),
     held by the benchmark while the run's launcher runs; a no-op without the option."""
-    if getattr(a, 'cpu_latency', None) is None:
-        return _NoRequest()
-    from rwpend_ros.sched import CpuLatencyRequest
-    req = CpuLatencyRequest(a.cpu_latency)
-    if not req.active:
+    from rwpend_ros.sched import request_cpu_latency
+    req = request_cpu_latency(getattr(a, 'cpu_latency', None))
+    if req.us is not None and not req.active:
         print(f'rwpend bench: CPU wake-up latency request {req.status}', file=sys.stderr, flush=True)
     return req
 

@@ -295,26 +295,20 @@ def run_stack(a, specs, files, on_started=None) -> int:
     print(f'rwpend: starting {names} in {a.ns} (ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}, '
           f'discovery {discovery_range()}, transport {transport_choice()})',
           flush=True)
-    lat = getattr(a, 'cpu_latency', None)
-    if lat is None:
-        return _run_launcher(a, launcher, on_started)
-    from rwpend_ros.sched import CpuLatencyRequest
-    with CpuLatencyRequest(lat) as req:     # held by this process until the stack has stopped
-        print(f'rwpend: CPU wake-up latency request: {req.status}', flush=True,
-              file=sys.stdout if req.active else sys.stderr)
-        return _run_launcher(a, launcher, on_started)
-
-
-def _run_launcher(a, launcher, on_started) -> int:
-    if a.plant == 'sim':
-        # the simulator exits by itself after --duration s from its sample 0 (simulated time in
-        # lockstep); the wall-clock bound only catches a stack that never starts
-        bound = None if a.duration is None else 120.0 + (20.0 if a.lockstep else 1.5) * a.duration
-        status = launcher.run(bound, on_started=on_started)
-    else:
-        status = launcher.run(a.duration, on_started=on_started)
-    print(f'rwpend: stopped ({launcher.reason})', flush=True)
-    return status
+    from rwpend_ros.sched import request_cpu_latency
+    with request_cpu_latency(getattr(a, 'cpu_latency', None)) as req:   # held until the stack has stopped
+        if req.us is not None:
+            print(f'rwpend: CPU wake-up latency request: {req.status}', flush=True,
+                  file=sys.stdout if req.active else sys.stderr)
+        if a.plant == 'sim':
+            # the simulator exits by itself after --duration s from its sample 0 (simulated time in
+            # lockstep); the wall-clock bound only catches a stack that never starts
+            bound = None if a.duration is None else 120.0 + (20.0 if a.lockstep else 1.5) * a.duration
+            status = launcher.run(bound, on_started=on_started)
+        else:
+            status = launcher.run(a.duration, on_started=on_started)
+        print(f'rwpend: stopped ({launcher.reason})', flush=True)
+        return status
 
 
 NODE_USAGE = """usage: rwpend node {NODES} [-p NAME:=VALUE ...] [--params FILE ...] [--ns NS] [--ros-args ...]

@@ -101,3 +101,26 @@ class CpuLatencyRequest:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class _NoCpuLatencyRequest:
+    """What :func:`request_cpu_latency` gives when no request was asked for."""
+    us = None
+    fd = None
+    active = False
+    status = 'none'
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> '_NoCpuLatencyRequest':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+
+def request_cpu_latency(us: int | None):
+    """:class:`CpuLatencyRequest` for ``us``, or one that does nothing when ``us`` is None (the
+    ``--cpu-latency`` option not given)."""
+    return _NoCpuLatencyRequest() if us is None else CpuLatencyRequest(us)

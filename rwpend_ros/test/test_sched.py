@@ -40,3 +40,9 @@ def test_not_permitted_or_missing_is_a_status_not_an_error(tmp_path):
 def test_bad_value_refused(bad, tmp_path):
     with pytest.raises(ValueError, match='wake-up latency'):
         CpuLatencyRequest(bad, path=str(tmp_path / 'x'))
+
+
+def test_no_option_no_request():
+    from rwpend_ros.sched import request_cpu_latency
+    with request_cpu_latency(None) as req:
+        assert req.us is None and not req.active and req.status == 'none'
