@@ -65,7 +65,11 @@ DEFAULT_PERIODS = (0.001, 0.0005)
 #: bench layouts -> ./rwpend up arguments
 LAYOUT_ARGS = {'separate': [], 'control': ['--composed', 'control'], 'composed': ['--composed', 'all']}
 SETTLE_S = 4.0            # wall seconds after start before the measured window opens
-LOCKSTEP_WALL_LIMIT = 600.0
+#: a lockstep run is stopped after this many wall seconds per simulated second (plus
+#: SETTLE_S + 30): the slowest ever measured ran at ~1x; once, a run froze with Fast DDS's async
+#: writer thread spinning at 100 % in two processes (rmw_fastrtps#666 describes such a loop),
+#: and the bench must not wait ten minutes for it (PERFORMANCE.md, 14.)
+LOCKSTEP_WALL_PER_SIM_S = 10.0
 
 
 # ------------------------------------------------------------------ helpers
@@ -467,12 +471,15 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
     try:
         launcher.start()
         reason = 'duration'
-        while reason == 'duration' and time.monotonic() - t0 < LOCKSTEP_WALL_LIMIT:
+        limit = SETTLE_S + 30.0 + LOCKSTEP_WALL_PER_SIM_S * sim_s
+        while reason == 'duration' and time.monotonic() - t0 < limit:
             snap = cpu_snapshot(launcher)
             if polls:   # a process that has ended keeps its last figure
                 snap = {n: (polls[-1][1].get(n) if v is None else v) for n, v in snap.items()}
             polls.append((time.monotonic(), snap))
             reason = launcher.wait(0.05)
+        if reason == 'duration':
+            reason = f'wall limit ({limit:g} s)'
     finally:
         s1 = cpu_times()
         codes = launcher.stop()

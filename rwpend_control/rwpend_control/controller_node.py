@@ -43,7 +43,6 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 
@@ -52,7 +51,8 @@ from rwpend_msgs.srv import SetMode
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher,
-                               declare_rig, diagnostic_status, local_subscription, run_node)
+                               RwNode, declare_rig, diagnostic_status, fast_path_values, local_subscription,
+                               run_node)
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
 
@@ -68,7 +68,7 @@ def _time_msg(t: float) -> Time:
     return Time(sec=int(sec), nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
 
 
-class ControllerNode(Node):
+class ControllerNode(RwNode):
     def __init__(self, **node_kwargs) -> None:
         """node_kwargs go to rclpy Node (context, parameter_overrides, namespace) for tests."""
         super().__init__('controller', **node_kwargs)
@@ -411,6 +411,7 @@ class ControllerNode(Node):
                 'law_errors': self.law_errors, 'param_errors': self.param_errors,
                 'malformed_states': self.malformed_states,
                 'friction_compensation': self.ctrl.config.friction_compensation,
+                **fast_path_values(self),
             })]
         self.pub_diag.publish(arr)
 

@@ -25,15 +25,14 @@ from dataclasses import asdict, fields
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher, declare_rig,
-                               diagnostic_status, run_node)
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher, RwNode,
+                               declare_rig, diagnostic_status, fast_path_values, local_subscription, run_node)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
                                           make_estimator, switch_estimator)
 
@@ -58,7 +57,7 @@ READ_ONLY_PARAMS = {
 }
 
 
-class EstimatorNode(Node):
+class EstimatorNode(RwNode):
     def __init__(self, **node_kwargs) -> None:
         """node_kwargs go to rclpy Node (e.g. context, parameter_overrides, namespace) for tests."""
         super().__init__('estimator', **node_kwargs)
@@ -110,9 +109,12 @@ class EstimatorNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire): no message
         # objects built or converted field by field (measured: PERFORMANCE.md)
-        self.create_subscription(EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL, raw=True)
-        self.command_topic = self.create_subscription(MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
-                                                      raw=True).topic_name
+        # also straight from a plant / controller in another process of this host
+        # (rwpend_ros.hostbus); not through the in-process bus: a command of a controller of this
+        # process would re-enter this node while it publishes the state the command answers
+        local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL, intra=False)
+        self.command_topic = local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
+                                                intra=False).topic_name
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.create_timer(float(period), self.publish_diagnostics)
 
@@ -285,6 +287,7 @@ class EstimatorNode(Node):
                 'seq_gaps': self.seq_gaps,
                 'deferred_samples': self.deferred,
                 'switches': self.switches,
+                **fast_path_values(self),
             })]
         self.pub_diag.publish(arr)
 

@@ -13,10 +13,14 @@ from typing import Any, Callable, Iterable, Mapping
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rwpend_model.rig import Rig, default_rig_file, read_params_file
+from rwpend_ros import hostbus
+from rwpend_ros.hostbus import CALLBACK_LOCK
 from rwpend_ros.intra import BUS
 from rwpend_ros.sched import apply_scheduling  # noqa: F401 - re-exported (pure module)
 from rwpend_ros.transport import apply_transport_or_exit
@@ -52,24 +56,99 @@ QOS_LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=History
                          depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-class LocalPublisher:
-    """A publisher whose messages reach the subscribers of :func:`local_subscription` in this
-    process directly (the in-process bus, :mod:`rwpend_ros.intra`), then DDS as usual. Takes
-    wire bytes (the per-sample path) or message objects; everything else is the rclpy
-    publisher's (``get_subscription_count`` ...)."""
+def _locked(callback):
+    """``callback`` run holding :data:`rwpend_ros.hostbus.CALLBACK_LOCK`."""
+    if callback is None:
+        return None
 
-    def __init__(self, node, msg_type, topic: str, qos) -> None:
+    def run(*args, **kwargs):
+        with CALLBACK_LOCK:
+            return callback(*args, **kwargs)
+    run.__wrapped__ = callback
+    return run
+
+
+class RwNode(Node):
+    """rclpy Node whose callbacks (subscriptions, timers, services, parameter callbacks, and
+    those rclpy makes itself: parameter services, ``/clock``) all run holding the process's
+    :data:`rwpend_ros.hostbus.CALLBACK_LOCK`, which the same-host fast path's receiving threads
+    hold too: a node's callbacks run one at a time whichever thread runs them."""
+
+    def create_subscription(self, msg_type, topic, callback, *args, **kwargs):
+        return super().create_subscription(msg_type, topic, _locked(callback), *args, **kwargs)
+
+    def create_timer(self, timer_period_sec, callback, *args, **kwargs):
+        return super().create_timer(timer_period_sec, _locked(callback), *args, **kwargs)
+
+    def create_service(self, srv_type, srv_name, callback, *args, **kwargs):
+        return super().create_service(srv_type, srv_name, _locked(callback), *args, **kwargs)
+
+    def add_on_set_parameters_callback(self, callback):
+        return super().add_on_set_parameters_callback(_locked(callback))
+
+    def add_pre_set_parameters_callback(self, callback):
+        return super().add_pre_set_parameters_callback(_locked(callback))
+
+    def add_post_set_parameters_callback(self, callback):
+        return super().add_post_set_parameters_callback(_locked(callback))
+
+
+#: how often (s, steady clock) a publisher with the same-host fast path looks at its number of
+#: subscribers; the graph is read when it changed, when a receiver was dropped, and every
+#: HOST_RETRY_PERIOD s (a receiver absent at the last reading may have come since)
+HOST_REFRESH_PERIOD = 0.25
+HOST_RETRY_PERIOD = 2.0
+
+
+class LocalPublisher:
+    """A publisher of the loop's wire bytes: a message first goes to the subscribers of
+    :func:`local_subscription` in other processes of this host (:mod:`rwpend_ros.hostbus`,
+    ``host=True``), then to those in this process (:mod:`rwpend_ros.intra`), then to DDS as
+    usual. Takes wire bytes (the per-sample path) or message objects; everything else is the
+    rclpy publisher's (``get_subscription_count`` ...). ``publish`` may be called from another
+    thread than the executor's (the simulator's sample loop)."""
+
+    def __init__(self, node, msg_type, topic: str, qos, host: bool = True) -> None:
         self.pub = node.create_publisher(msg_type, topic, qos)
         self.topic = self.pub.topic_name
+        self.sender: hostbus.Sender | None = None
+        if host and hostbus.enabled():
+            self.sender = hostbus.Sender()
+            self._node = node
+            self._domain = node.context.get_domain_id()
+            self._count = -1
+            self._ticks = 0
+            node.create_timer(HOST_REFRESH_PERIOD, self._refresh, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _refresh(self) -> None:
+        """Targets of the fast path from the graph (the subscribers' node names)."""
+        count = self.pub.get_subscription_count()
+        self._ticks += 1
+        if (count == self._count and not self.sender.dropped
+                and self._ticks * HOST_REFRESH_PERIOD < HOST_RETRY_PERIOD):
+            return
+        self._count = count
+        self._ticks = 0
+        self.sender.set_targets(
+            hostbus.address(self._domain, self.topic, hostbus.node_fqn(info.node_namespace, info.node_name))
+            for info in self._node.get_subscriptions_info_by_topic(self.topic))
 
     def publish(self, msg) -> None:
+        sender = self.sender
         if not isinstance(msg, (bytes, bytearray)):
-            if not BUS.local(self.topic):
+            if not (sender is not None and sender.targets) and not BUS.local(self.topic):
                 self.pub.publish(msg)
                 return
             from rclpy.serialization import serialize_message
             msg = serialize_message(msg)
-        BUS.publish(self.topic, bytes(msg), self.pub.publish)
+        data = hostbus.pad4(bytes(msg))    # the bytes DDS delivers across processes
+        if sender is not None and sender.targets:
+            sender.send(data)       # first: the other process starts while this one goes on
+        BUS.publish(self.topic, data, self.pub.publish)
+
+    def destroy(self) -> None:
+        if self.sender is not None:
+            self.sender.close()
 
     def __getattr__(self, name):
         if name == 'pub':           # not built (the publisher's creation failed)
@@ -78,15 +157,71 @@ class LocalPublisher:
 
 
 def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], None], qos,
-                       before_dds: bool = True):
-    """A raw subscription (``callback`` takes wire bytes) that also takes the messages of a
-    :class:`LocalPublisher` of another node of this process directly, without the DDS hop
-    (:mod:`rwpend_ros.intra`; the DDS copy of those is dropped); ``before_dds`` see
-    :meth:`rwpend_ros.intra.LocalBus.subscribe`. Returns the rclpy subscription."""
-    holder = []
-    sub = node.create_subscription(msg_type, topic, lambda data: holder[0].from_dds(data), qos, raw=True)
-    holder.append(BUS.subscribe(sub.topic_name, callback, before_dds))
+                       before_dds: bool = True, intra: bool = True, host: bool = True):
+    """A raw subscription (``callback`` takes wire bytes, holding
+    :data:`rwpend_ros.hostbus.CALLBACK_LOCK`) that also takes the messages of a
+    :class:`LocalPublisher` directly: from another node of this process (``intra``,
+    :mod:`rwpend_ros.intra`; ``before_dds`` see :meth:`rwpend_ros.intra.LocalBus.subscribe`) and
+    from another process of this host (``host``, :mod:`rwpend_ros.hostbus`, received by a
+    thread of its own). Each message is delivered once, in the publisher's order (the DDS copies
+    of those are dropped). Returns the rclpy subscription; its ``hostbus_merge`` attribute is the
+    :class:`rwpend_ros.hostbus.Merge` (None without the fast path)."""
+    sink = []
+
+    def from_dds(data):
+        with CALLBACK_LOCK:
+            sink[0](data)
+    topic_name = node.resolve_topic_name(topic)
+    local = BUS.subscribe(topic_name, callback, before_dds) if intra else None
+    deliver = local.run if local is not None else callback
+    merge = receiver = None
+    if host and hostbus.enabled():
+        # bound before the subscription shows in the graph: a publisher that sees it can send
+        merge = hostbus.Merge(deliver)
+        addr = hostbus.address(node.context.get_domain_id(), topic_name, node.get_fully_qualified_name())
+        depth = qos.depth if qos.history == HistoryPolicy.KEEP_LAST else 1 << 30
+        try:
+            receiver = hostbus.Receiver(addr, merge, depth, on_error=_host_callback_failed,
+                                        on_start=BUS.extra_threads.add)
+        except OSError as exc:
+            node.get_logger().warn(f'{topic_name}: no same-host fast path ({exc}); DDS only')
+            merge = None
+    if local is not None:
+        if merge is not None:
+            local.sink = merge.from_dds     # in-process copies dropped first, then the merge
+        sink.append(local.from_dds)
+    else:
+        sink.append(merge.from_dds if merge is not None else deliver)
+    try:
+        sub = Node.create_subscription(node, msg_type, topic, from_dds, qos, raw=True)
+    except BaseException:
+        if receiver is not None:
+            receiver.close()
+        if local is not None:
+            BUS.unsubscribe(topic_name, local)
+        raise
+    sub.hostbus_merge = merge
+    if merge is not None:
+        if not hasattr(node, 'hostbus_merges'):
+            node.hostbus_merges = {}
+        node.hostbus_merges[topic_name] = merge
     return sub
+
+
+def fast_path_values(node) -> dict[str, str]:
+    """Diagnostics key-values of ``node``'s same-host fast path, one per subscription:
+    messages delivered fast / through DDS, DDS copies dropped, returns to DDS (resyncs)."""
+    return {f'fast_path {topic}': (f"fast {c['fast']}, dds {c['dds']}, duplicates {c['duplicates']}, "
+                                   f"skipped {c['skipped']}, resyncs {c['resyncs']}")
+            for topic, c in ((t, m.counters()) for t, m in getattr(node, 'hostbus_merges', {}).items())}
+
+
+#: an exception raised by a callback on a fast-path receiving thread (re-raised by spin_executor)
+_HOST_ERRORS: list[BaseException] = []
+
+
+def _host_callback_failed(exc: BaseException) -> None:
+    _HOST_ERRORS.append(exc)
 
 
 class ConfigError(ValueError):
@@ -138,6 +273,8 @@ def make_executor():
 def spin_executor(executor, until: Callable[[], bool] | None = None) -> None:
     """Spin ``executor`` until rclpy shuts down (SIGINT/SIGTERM) or ``until()`` is true."""
     while rclpy.ok() and not (until is not None and until()):
+        if _HOST_ERRORS:     # a callback failed on a fast-path thread: as if on the executor's
+            raise _HOST_ERRORS.pop(0)
         try:
             executor.spin_once(timeout_sec=0.1)
         except ExternalShutdownException:
@@ -211,6 +348,7 @@ def run_nodes(factories: Iterable[Callable[[], Any]], args: list[str] | None = N
         print(f'error: {exc}', file=sys.stderr, flush=True)
         status = 2
     finally:
+        hostbus.close_all()
         BUS.reset()
         for node in reversed(nodes):
             close = getattr(node, 'close', None)

@@ -14,8 +14,10 @@ processes).
 Rules (what keeps it safe):
 
 * only on the executor's thread (:attr:`LocalBus.thread`, set by ``run_nodes`` once the nodes
-  are built; None = off): a publish from another thread (the simulator's real-time sample
-  loop) goes through DDS as before, so a node's callbacks still run on one thread only;
+  are built; None = off) and on the receiving threads of the same-host fast path
+  (:attr:`LocalBus.extra_threads`, :mod:`rwpend_ros.hostbus`; they hold the process's callback
+  lock): a publish from another thread (the simulator's real-time sample loop) goes through
+  DDS as before, so a node's callbacks still run one at a time;
 * a local subscriber whose callback is running already (on the stack, further up) is not
   entered again: the message then takes the DDS path like any other;
 * the message is published on DDS too, after the local delivery: other processes (the
@@ -41,7 +43,7 @@ KEEP = 64
 
 
 class _LocalSub:
-    __slots__ = ('callback', 'before_dds', 'pending', 'active', 'delivered', 'duplicates')
+    __slots__ = ('callback', 'before_dds', 'pending', 'active', 'delivered', 'duplicates', 'sink')
 
     def __init__(self, callback: Callable[[bytes], None], before_dds: bool = True) -> None:
         self.callback = callback
@@ -50,6 +52,8 @@ class _LocalSub:
         self.active = False          # its callback is running (on the executor's thread)
         self.delivered = 0           # messages delivered through the bus
         self.duplicates = 0          # DDS copies dropped
+        #: where a DDS message not delivered locally goes (run; the same-host fast path's merge)
+        self.sink: Callable[[bytes], None] = self.run
 
     def run(self, data: bytes) -> None:
         self.active = True
@@ -68,7 +72,7 @@ class _LocalSub:
                 pass
             self.duplicates += 1
             return
-        self.run(data)
+        self.sink(data)
 
 
 class LocalBus:
@@ -80,6 +84,8 @@ class LocalBus:
         self.enabled = enabled
         #: ident of the executor's thread; None until run_nodes starts spinning (bus off)
         self.thread: int | None = None
+        #: idents of other threads that run callbacks holding the callback lock (hostbus)
+        self.extra_threads: set[int] = set()
         self.topics: dict[str, list[_LocalSub]] = {}
 
     def subscribe(self, topic: str, callback: Callable[[bytes], None], before_dds: bool = True) -> _LocalSub:
@@ -103,7 +109,10 @@ class LocalBus:
         if not self.enabled or self.thread is None:
             return []
         subs = self.topics.get(topic)
-        if not subs or threading.get_ident() != self.thread:
+        if not subs:
+            return []
+        ident = threading.get_ident()
+        if ident != self.thread and ident not in self.extra_threads:
             return []
         return [s for s in subs if not s.active]
 
@@ -134,6 +143,7 @@ class LocalBus:
     def reset(self) -> None:
         """Off, and no subscription (run_nodes, when its nodes are destroyed)."""
         self.thread = None
+        self.extra_threads.clear()
         self.topics.clear()
 
 

@@ -12,7 +12,7 @@ import rclpy
 from rclpy.node import Node
 
 from rwpend_msgs.msg import MotorCommand
-from rwpend_ros import wire
+from rwpend_ros import hostbus, wire
 from rwpend_ros.common import QOS_CONTROL, QOS_CONTROL_PUB, LocalPublisher, local_subscription
 from rwpend_ros.intra import BUS
 from rwpend_ros.transport import apply_transport
@@ -29,6 +29,7 @@ def nodes(monkeypatch):
     a = Node('pub_side', namespace='/intra_test', context=ctx)
     b = Node('sub_side', namespace='/intra_test', context=ctx)
     yield a, b
+    hostbus.close_all()
     BUS.reset()
     a.destroy_node()
     b.destroy_node()

@@ -21,7 +21,6 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
@@ -30,8 +29,9 @@ from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState
 from rwpend_msgs.srv import Disturb
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, declare_rig,
-                               diagnostic_status, local_subscription, run_node)
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, LocalPublisher,
+                               RwNode, declare_rig, diagnostic_status, fast_path_values,
+                               local_subscription, run_node)
 from rwpend_sim.sim_core import SimCore
 
 PARAMS = {
@@ -64,7 +64,7 @@ PARAMS = {
 }
 
 
-class SimNode(Node):
+class SimNode(RwNode):
     def __init__(self) -> None:
         super().__init__('sim')
         self.rig = declare_rig(self)
@@ -96,7 +96,8 @@ class SimNode(Node):
         self.stop = threading.Event()
         self.finished = False
 
-        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
+        # first to an estimator in another process of this host, then DDS (rwpend_ros.hostbus)
+        self.pub_enc = LocalPublisher(self, EncoderCounts, 'encoders', QOS_CONTROL_PUB)
         self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
@@ -347,6 +348,7 @@ class SimNode(Node):
             'late_commands': c.late_commands, 'estop_samples': c.estop_samples,
             'overruns': self.overruns, 'malformed_commands': self.malformed_commands,
             'estop': self.core.estop, 'finished': self.finished,
+            **fast_path_values(self),
         }
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
