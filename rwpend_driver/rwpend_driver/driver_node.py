@@ -18,6 +18,7 @@ All protocol and link logic lives in :mod:`rwpend_driver.link` / :mod:`rwpend_dr
 from __future__ import annotations
 
 import os
+import struct
 import threading
 import time
 
@@ -28,8 +29,10 @@ from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, declare_rig,
-                               diagnostic_status, run_node)
+from rwpend_ros import wire
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, LocalPublisher,
+                               LockedCallbacks, declare_rig, diagnostic_status, fast_path_values, local_subscription,
+                               locked, run_node)
 
 from .link import DriverLink, LinkConfig
 
@@ -52,7 +55,7 @@ PARAMS = {
 }
 
 
-class DriverNode(LifecycleNode):
+class DriverNode(LockedCallbacks, LifecycleNode):
     def __init__(self) -> None:
         super().__init__('driver')
         for name, (default, descr) in PARAMS.items():
@@ -86,9 +89,12 @@ class DriverNode(LifecycleNode):
         self.estop_commands = 0          # commands refused because of the e-stop
         self.enc = EncoderCounts()
         self.enc.header.frame_id = p['frame_id']
-        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
+        # first to an estimator in another process of this host, then DDS (rwpend_ros.hostbus)
+        self.pub_enc = LocalPublisher(self, EncoderCounts, 'encoders', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        self.create_subscription(MotorCommand, 'command', self.on_command, QOS_CONTROL)
+        self.malformed_commands = 0
+        # also straight from a controller in another process of this host (wire bytes)
+        local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL)
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
         self.create_timer(p['diagnostics_period'], self.publish_diagnostics)
@@ -118,6 +124,9 @@ class DriverNode(LifecycleNode):
         else:
             lg.info(msg)
 
+    # transitions run holding the callback lock, like every other callback of the node (a
+    # command taken by the fast path's thread never sees a transition half done)
+    @locked
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.link = DriverLink(self.cfg, on_sample=self.on_sample, log=self._log)
         deadline = time.monotonic() + self.p['connect_timeout']
@@ -144,6 +153,7 @@ class DriverNode(LifecycleNode):
         self.lifecycle = 'inactive'
         return TransitionCallbackReturn.SUCCESS
 
+    @locked
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.link.set_active(not self.estop)    # a latched e-stop keeps the amplifier off
         self.active = True
@@ -151,6 +161,7 @@ class DriverNode(LifecycleNode):
         self.get_logger().info('active: amplifier enabled, zero torque until commands arrive')
         return TransitionCallbackReturn.SUCCESS
 
+    @locked
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.active = False
         self.link.set_active(False)
@@ -168,16 +179,19 @@ class DriverNode(LifecycleNode):
             self.link.close()
         self.lifecycle = 'unconfigured'
 
+    @locked
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._teardown()
         self.link = None
         return TransitionCallbackReturn.SUCCESS
 
+    @locked
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._teardown()
         self.lifecycle = 'finalized'
         return TransitionCallbackReturn.SUCCESS
 
+    @locked
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._teardown()
         return TransitionCallbackReturn.SUCCESS
@@ -207,14 +221,24 @@ class DriverNode(LifecycleNode):
         except Exception:  # noqa: BLE001 - context shut down under the link thread
             self.stop.set()
 
-    def on_command(self, msg: MotorCommand) -> None:
+    def on_command_raw(self, data: bytes) -> None:
+        """A command as wire bytes (rwpend_ros.wire); malformed bytes are counted, nothing else
+        changes."""
+        try:
+            seq, u = wire.unpack_command(data)
+        except (struct.error, IndexError):
+            self.malformed_commands += 1
+            return
+        self.command(seq, u)
+
+    def command(self, seq: int, u: float) -> None:
         link = self.link
         if self.estop:
             self.estop_commands += 1
             return
         if link is None or not self.active:
             return
-        link.command(msg.seq, msg.u)
+        link.command(seq, u)
 
     # ------------------------------------------------------------ e-stop
     def set_estop(self, on: bool) -> str:
@@ -245,7 +269,8 @@ class DriverNode(LifecycleNode):
     def publish_diagnostics(self) -> None:
         link = self.link
         values = {'lifecycle': self.lifecycle, 'port': self.cfg.port, 'estop': self.estop,
-                  'estop_commands': self.estop_commands}
+                  'estop_commands': self.estop_commands, 'malformed_commands': self.malformed_commands,
+                  **fast_path_values(self)}
         if self.estop:
             level, msg = DiagnosticStatus.ERROR, 'e-stop latched: motor at zero, amplifier disabled'
             if link is not None:

@@ -56,8 +56,8 @@ QOS_LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=History
                          depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def _locked(callback):
-    """``callback`` run holding :data:`rwpend_ros.hostbus.CALLBACK_LOCK`."""
+def locked(callback):
+    """``callback`` run holding :data:`rwpend_ros.hostbus.CALLBACK_LOCK` (also a decorator)."""
     if callback is None:
         return None
 
@@ -68,29 +68,35 @@ def _locked(callback):
     return run
 
 
-class RwNode(Node):
-    """rclpy Node whose callbacks (subscriptions, timers, services, parameter callbacks, and
-    those rclpy makes itself: parameter services, ``/clock``) all run holding the process's
-    :data:`rwpend_ros.hostbus.CALLBACK_LOCK`, which the same-host fast path's receiving threads
-    hold too: a node's callbacks run one at a time whichever thread runs them."""
+class LockedCallbacks:
+    """Mixin for an rclpy Node class: its callbacks (subscriptions, timers, services, parameter
+    callbacks, and those rclpy makes itself through these methods: parameter services,
+    ``/clock``) all run holding the process's :data:`rwpend_ros.hostbus.CALLBACK_LOCK`, which
+    the same-host fast path's receiving threads hold too: a node's callbacks run one at a time
+    whichever thread runs them. (A LifecycleNode makes its state services without these
+    methods: decorate its transition callbacks with :func:`locked`.)"""
 
     def create_subscription(self, msg_type, topic, callback, *args, **kwargs):
-        return super().create_subscription(msg_type, topic, _locked(callback), *args, **kwargs)
+        return super().create_subscription(msg_type, topic, locked(callback), *args, **kwargs)
 
     def create_timer(self, timer_period_sec, callback, *args, **kwargs):
-        return super().create_timer(timer_period_sec, _locked(callback), *args, **kwargs)
+        return super().create_timer(timer_period_sec, locked(callback), *args, **kwargs)
 
     def create_service(self, srv_type, srv_name, callback, *args, **kwargs):
-        return super().create_service(srv_type, srv_name, _locked(callback), *args, **kwargs)
+        return super().create_service(srv_type, srv_name, locked(callback), *args, **kwargs)
 
     def add_on_set_parameters_callback(self, callback):
-        return super().add_on_set_parameters_callback(_locked(callback))
+        return super().add_on_set_parameters_callback(locked(callback))
 
     def add_pre_set_parameters_callback(self, callback):
-        return super().add_pre_set_parameters_callback(_locked(callback))
+        return super().add_pre_set_parameters_callback(locked(callback))
 
     def add_post_set_parameters_callback(self, callback):
-        return super().add_post_set_parameters_callback(_locked(callback))
+        return super().add_post_set_parameters_callback(locked(callback))
+
+
+class RwNode(LockedCallbacks, Node):
+    """rclpy Node with :class:`LockedCallbacks` (the simulator, estimator and controller)."""
 
 
 #: how often (s, steady clock) a publisher with the same-host fast path looks at its number of
@@ -182,7 +188,8 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
         depth = qos.depth if qos.history == HistoryPolicy.KEEP_LAST else 1 << 30
         try:
             receiver = hostbus.Receiver(addr, merge, depth, on_error=_host_callback_failed,
-                                        on_start=BUS.extra_threads.add)
+                                        on_start=BUS.extra_threads.add,
+                                        in_process=not (intra and BUS.enabled))
         except OSError as exc:
             node.get_logger().warn(f'{topic_name}: no same-host fast path ({exc}); DDS only')
             merge = None
