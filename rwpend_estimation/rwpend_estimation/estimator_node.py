@@ -111,8 +111,7 @@ class EstimatorNode(RwNode):
         # objects built or converted field by field (measured: PERFORMANCE.md)
         # also straight from a plant / controller in another process of this host
         # (rwpend_ros.hostbus); not through the in-process bus: a command of a controller of this
-        # process would re-enter this node while it publishes the state the command answers (it
-        # comes through the fast path's socket instead, once the running callbacks returned)
+        # process would re-enter this node while it publishes the state the command answers
         local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL, intra=False)
         self.command_topic = local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
                                                 intra=False).topic_name

@@ -188,8 +188,7 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
         depth = qos.depth if qos.history == HistoryPolicy.KEEP_LAST else 1 << 30
         try:
             receiver = hostbus.Receiver(addr, merge, depth, on_error=_host_callback_failed,
-                                        on_start=BUS.extra_threads.add,
-                                        in_process=not (intra and BUS.enabled))
+                                        on_start=BUS.extra_threads.add)
         except OSError as exc:
             node.get_logger().warn(f'{topic_name}: no same-host fast path ({exc}); DDS only')
             merge = None

@@ -78,8 +78,9 @@ def node_fqn(namespace: str, name: str) -> str:
     return namespace.rstrip('/') + '/' + name
 
 
-#: addresses bound by this process whose subscribers the in-process bus serves
-#: (:mod:`rwpend_ros.intra`): a publisher of this process does not send to them
+#: addresses bound by this process: a publisher of this process does not send to them
+#: (:mod:`rwpend_ros.intra` or DDS serves subscribers of its own process; a socket between two
+#: threads of one process was measured and is slower, PERFORMANCE.md, 14.)
 _LOCAL: set[bytes] = set()
 _RECEIVERS: list['Receiver'] = []
 
@@ -150,17 +151,11 @@ class Receiver:
     datagram to ``merge.from_fast`` holding :data:`CALLBACK_LOCK`. Of a backlog found when the
     lock is taken, only the newest ``depth`` are delivered. ``on_error(exc)`` gets an exception
     raised by the callback (the thread stops; DDS delivers from then on). OSError from ``bind``
-    (address in use: two nodes of one name) propagates: no fast path then.
-
-    ``in_process``: publishers of this process send to it too. For a subscriber the in-process
-    bus does not serve (the estimator's ``command`` from a controller of its process: a direct
-    call would re-enter the estimator while it publishes the state the command answers), the
-    socket delivers the message once the running callbacks have returned and released the lock
-    -- sooner than DDS, and never re-entrant."""
+    (address in use: two nodes of one name) propagates: no fast path then."""
 
     def __init__(self, addr: bytes, merge: Merge, depth: int,
                  on_error: Callable[[BaseException], None] | None = None,
-                 on_start: Callable[[int], None] | None = None, in_process: bool = False) -> None:
+                 on_start: Callable[[int], None] | None = None) -> None:
         self.addr = addr
         self.merge = merge
         self.depth = max(1, int(depth))
@@ -172,8 +167,7 @@ class Receiver:
         except OSError:
             self.sock.close()
             raise
-        if not in_process:
-            _LOCAL.add(addr)
+        _LOCAL.add(addr)
         _RECEIVERS.append(self)
         self.closed = False
         self.thread = threading.Thread(target=self._run, name='hostbus-rx', daemon=True)

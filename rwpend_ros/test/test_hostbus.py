@@ -193,26 +193,6 @@ def test_sender_forgets_absent_receivers_and_skips_its_own_process():
         s.close()
 
 
-def test_an_in_process_receiver_is_a_target_of_this_process():
-    got = []
-    m = Merge(got.append)
-    m.fast_mode = True
-    addr = unique_addr('inproc')
-    r = Receiver(addr, m, depth=10, in_process=True)
-    s = Sender()
-    try:
-        s.set_targets([addr])
-        assert s.targets == (addr,)
-        with CALLBACK_LOCK:          # sent inside a callback: delivered once it has returned
-            s.send(b'cmd')
-            time.sleep(0.02)
-            assert got == []
-        assert wait_for(lambda: got == [b'cmd'])
-    finally:
-        r.close()
-        s.close()
-
-
 def test_a_second_receiver_on_one_address_is_refused():
     addr = unique_addr('twice')
     r = Receiver(addr, Merge(lambda d: None), depth=10)
