@@ -133,11 +133,15 @@ class LocalPublisher:
         if (count == self._count and not self.sender.dropped
                 and self._ticks * HOST_REFRESH_PERIOD < HOST_RETRY_PERIOD):
             return
+        try:
+            infos = self._node.get_subscriptions_info_by_topic(self.topic)
+        except Exception:  # noqa: BLE001 - node or context going away: keep the targets
+            return
         self._count = count
         self._ticks = 0
         self.sender.set_targets(
             hostbus.address(self._domain, self.topic, hostbus.node_fqn(info.node_namespace, info.node_name))
-            for info in self._node.get_subscriptions_info_by_topic(self.topic))
+            for info in infos)
 
     def publish(self, msg) -> None:
         sender = self.sender
@@ -151,10 +155,6 @@ class LocalPublisher:
         if sender is not None and sender.targets:
             sender.send(data)       # first: the other process starts while this one goes on
         BUS.publish(self.topic, data, self.pub.publish)
-
-    def destroy(self) -> None:
-        if self.sender is not None:
-            self.sender.close()
 
     def __getattr__(self, name):
         if name == 'pub':           # not built (the publisher's creation failed)
