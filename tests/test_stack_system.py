@@ -126,6 +126,23 @@ def test_offline_reestimation_matches_live(lockstep_bags, tmp_path, ros_env):
         assert np.max(np.abs(off[f] - live[f])) < 1e-9, f
 
 
+def test_separate_processes_take_the_same_host_fast_path(lockstep_bags):
+    """The loop's messages between the processes of a lockstep run went through the fast path
+    (rwpend_ros.hostbus), each delivered once: the nodes' /diagnostics count them."""
+    from test_safety_system import diagnostics
+    last = {}
+    for _, name, _, _, values in diagnostics(lockstep_bags[0][0]):
+        for key, value in values.items():
+            if key.startswith('fast_path '):
+                last[(name, key)] = dict(kv.split(' ') for kv in value.split(', '))
+    seen = {key for _, key in last}
+    assert {'fast_path /rwpend/encoders', 'fast_path /rwpend/command', 'fast_path /rwpend/state'} <= seen, seen
+    for (name, key), c in last.items():
+        fast, dds, dup = int(c['fast']), int(c['dds']), int(c['duplicates'])
+        assert fast > 0.5 * (fast + dds), (name, key, c)     # most of them fast
+        assert dup <= fast, (name, key, c)                   # only copies of fast ones dropped
+
+
 def test_live_tools_against_a_running_stack(ros_env):
     log_path = Path(ros_env.get('TMPDIR', '/tmp')) / f'rwpend_stack_{ros_env["ROS_DOMAIN_ID"]}.log'
     log = open(log_path, 'w')
