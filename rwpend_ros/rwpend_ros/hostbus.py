@@ -48,8 +48,8 @@ from typing import Callable, Iterable
 CALLBACK_LOCK = threading.RLock()
 #: fast-delivered messages per subscription whose DDS copy has not come yet
 KEEP = 1024
-#: largest datagram read (the loop's messages are < 200 bytes; a bigger one is cut: never sent,
-#: see Sender.send)
+#: largest message sent fast (the loop's messages are < 200 bytes); a bigger one goes by DDS
+#: alone (Sender.send), so a receiver never reads a cut datagram
 MAX_DATAGRAM = 65536
 
 
@@ -250,12 +250,16 @@ class Sender:
         self.sent = 0
         self.failed = 0          # sends that failed for another reason than an absent receiver
         self.dropped = False     # a target was dropped (failed) since the last set_targets
+        self.too_big = 0         # messages over MAX_DATAGRAM, left to DDS
 
     def set_targets(self, addrs: Iterable[bytes]) -> None:
         self.targets = tuple(a for a in dict.fromkeys(addrs) if a not in _LOCAL)
         self.dropped = False
 
     def send(self, data: bytes) -> None:
+        if len(data) > MAX_DATAGRAM:
+            self.too_big += 1
+            return
         for addr in self.targets:
             try:
                 self.sock.sendto(data, socket.MSG_DONTWAIT, addr)

@@ -193,6 +193,24 @@ def test_sender_forgets_absent_receivers_and_skips_its_own_process():
         s.close()
 
 
+def test_a_message_too_big_for_one_datagram_is_left_to_dds():
+    got = []
+    m = Merge(got.append)
+    m.fast_mode = True
+    addr = unique_addr('big')
+    r = Receiver(addr, m, depth=10)
+    s = Sender()
+    try:
+        s.targets = (addr,)
+        s.send(bytes(hostbus.MAX_DATAGRAM + 4))
+        s.send(b'small')
+        assert wait_for(lambda: got == [b'small'])
+        assert s.too_big == 1 and s.targets == (addr,)
+    finally:
+        r.close()
+        s.close()
+
+
 def test_a_second_receiver_on_one_address_is_refused():
     addr = unique_addr('twice')
     r = Receiver(addr, Merge(lambda d: None), depth=10)
