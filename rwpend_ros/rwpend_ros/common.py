@@ -170,13 +170,8 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
     :mod:`rwpend_ros.intra`; ``before_dds`` see :meth:`rwpend_ros.intra.LocalBus.subscribe`) and
     from another process of this host (``host``, :mod:`rwpend_ros.hostbus`, received by a
     thread of its own). Each message is delivered once, in the publisher's order (the DDS copies
-    of those are dropped). Returns the rclpy subscription; its ``hostbus_merge`` attribute is the
-    :class:`rwpend_ros.hostbus.Merge` (None without the fast path)."""
-    sink = []
-
-    def from_dds(data):
-        with CALLBACK_LOCK:
-            sink[0](data)
+    of those are dropped). Returns the rclpy subscription; the fast path's
+    :class:`rwpend_ros.hostbus.Merge` is in ``node.hostbus_merges[topic]``."""
     topic_name = node.resolve_topic_name(topic)
     local = BUS.subscribe(topic_name, callback, before_dds) if intra else None
     deliver = local.run if local is not None else callback
@@ -192,12 +187,13 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
         except OSError as exc:
             node.get_logger().warn(f'{topic_name}: no same-host fast path ({exc}); DDS only')
             merge = None
-    if local is not None:
-        if merge is not None:
-            local.sink = merge.from_dds     # in-process copies dropped first, then the merge
-        sink.append(local.from_dds)
-    else:
-        sink.append(merge.from_dds if merge is not None else deliver)
+    if local is not None and merge is not None:
+        local.sink = merge.from_dds         # in-process copies dropped first, then the merge
+    take = local.from_dds if local is not None else merge.from_dds if merge is not None else deliver
+
+    def from_dds(data):
+        with CALLBACK_LOCK:
+            take(data)
     try:
         sub = Node.create_subscription(node, msg_type, topic, from_dds, qos, raw=True)
     except BaseException:
@@ -206,7 +202,6 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
         if local is not None:
             BUS.unsubscribe(topic_name, local)
         raise
-    sub.hostbus_merge = merge
     if merge is not None:
         if not hasattr(node, 'hostbus_merges'):
             node.hostbus_merges = {}

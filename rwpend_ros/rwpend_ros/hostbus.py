@@ -44,6 +44,8 @@ import threading
 from collections import deque
 from typing import Callable, Iterable
 
+from rwpend_ros.intra import take_copy
+
 #: held by every callback of our nodes (executor thread) and by the receiving threads
 CALLBACK_LOCK = threading.RLock()
 #: fast-delivered messages per subscription whose DDS copy has not come yet
@@ -123,16 +125,11 @@ class Merge:
 
     def from_dds(self, data: bytes) -> None:
         if self.fast_mode:
-            p = self.pending
-            if p and data in p:
-                # DDS keeps a publisher's order: copies of older pending messages will not come
-                # any more (a keep-last reader dropped them)
-                while p.popleft() != data:
-                    pass
+            if take_copy(self.pending, data):
                 self.duplicates += 1
                 return
             self.fast_mode = False       # the fast path missed this one: DDS alone until they meet
-            p.clear()
+            self.pending.clear()
             self.newest_fast = None
             self.resyncs += 1
         self.dds += 1

@@ -42,6 +42,18 @@ from typing import Callable
 KEEP = 64
 
 
+def take_copy(pending: deque, data: bytes) -> bool:
+    """True (and ``data`` gone from ``pending``) when ``data`` is the copy of a message already
+    delivered another way. DDS keeps a publisher's order: the copies of the older pending
+    messages will not come any more (a keep-last reader dropped them), so they go too. Shared
+    with :class:`rwpend_ros.hostbus.Merge`."""
+    if pending and data in pending:
+        while pending.popleft() != data:
+            pass
+        return True
+    return False
+
+
 class _LocalSub:
     __slots__ = ('callback', 'before_dds', 'pending', 'active', 'delivered', 'duplicates', 'sink')
 
@@ -64,12 +76,7 @@ class _LocalSub:
 
     def from_dds(self, data: bytes) -> None:
         """The DDS subscription's callback: drops the copy of a message the bus delivered."""
-        p = self.pending
-        if p and data in p:
-            # DDS keeps a publisher's order: the copies of the older pending messages will not
-            # come any more (a keep-last reader dropped them), so they go too
-            while p.popleft() != data:
-                pass
+        if take_copy(self.pending, data):
             self.duplicates += 1
             return
         self.sink(data)

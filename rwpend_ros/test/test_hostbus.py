@@ -157,24 +157,36 @@ def test_sender_and_receiver_deliver_on_the_receiving_thread_holding_the_lock():
     assert addr not in hostbus._LOCAL
 
 
-def test_receiver_keeps_the_newest_depth_of_a_backlog():
-    got = []
-    m = Merge(got.append)
-    m.fast_mode = True
-    addr = unique_addr('depth')
-    r = Receiver(addr, m, depth=2)
-    s = Sender()
-    try:
-        s.targets = (addr,)
-        with CALLBACK_LOCK:           # the receiving thread waits: a backlog of 5
-            for x in (b'1', b'2', b'3', b'4', b'5'):
-                s.send(x)
-            time.sleep(0.05)
-        assert wait_for(lambda: got == [b'4', b'5'])
-        assert m.skipped == 3 and list(m.pending) == [b'1', b'2', b'3', b'4', b'5']
-    finally:
+@pytest.fixture
+def fast_pair():
+    """make(tag, depth) -> (delivered list, merge in fast mode, receiver, sender aimed at it);
+    closed after the test."""
+    made = []
+
+    def make(tag, depth=10):
+        got = []
+        m = Merge(got.append)
+        m.fast_mode = True
+        addr = unique_addr(tag)
+        r = Receiver(addr, m, depth=depth)
+        s = Sender()
+        s.targets = (addr,)       # set_targets skips this process's receivers
+        made.append((r, s))
+        return got, m, r, s
+    yield make
+    for r, s in made:
         r.close()
         s.close()
+
+
+def test_receiver_keeps_the_newest_depth_of_a_backlog(fast_pair):
+    got, m, _, s = fast_pair('depth', depth=2)
+    with CALLBACK_LOCK:           # the receiving thread waits: a backlog of 5
+        for x in (b'1', b'2', b'3', b'4', b'5'):
+            s.send(x)
+        time.sleep(0.05)
+    assert wait_for(lambda: got == [b'4', b'5'])
+    assert m.skipped == 3 and list(m.pending) == [b'1', b'2', b'3', b'4', b'5']
 
 
 def test_sender_forgets_absent_receivers_and_skips_its_own_process():
@@ -193,22 +205,12 @@ def test_sender_forgets_absent_receivers_and_skips_its_own_process():
         s.close()
 
 
-def test_a_message_too_big_for_one_datagram_is_left_to_dds():
-    got = []
-    m = Merge(got.append)
-    m.fast_mode = True
-    addr = unique_addr('big')
-    r = Receiver(addr, m, depth=10)
-    s = Sender()
-    try:
-        s.targets = (addr,)
-        s.send(bytes(hostbus.MAX_DATAGRAM + 4))
-        s.send(b'small')
-        assert wait_for(lambda: got == [b'small'])
-        assert s.too_big == 1 and s.targets == (addr,)
-    finally:
-        r.close()
-        s.close()
+def test_a_message_too_big_for_one_datagram_is_left_to_dds(fast_pair):
+    got, _, r, s = fast_pair('big')
+    s.send(bytes(hostbus.MAX_DATAGRAM + 4))
+    s.send(b'small')
+    assert wait_for(lambda: got == [b'small'])
+    assert s.too_big == 1 and s.targets == (r.addr,)
 
 
 def test_a_second_receiver_on_one_address_is_refused():
@@ -221,25 +223,18 @@ def test_a_second_receiver_on_one_address_is_refused():
         r.close()
 
 
-def test_a_failing_callback_is_reported_and_stops_the_thread():
+def test_a_failing_callback_is_reported_and_stops_the_thread(fast_pair):
     errors = []
+    _, m, r, s = fast_pair('err')
+    r.on_error = errors.append
 
     def boom(data):
         raise RuntimeError('law failed')
-    m = Merge(boom)
-    m.fast_mode = True
-    addr = unique_addr('err')
-    r = Receiver(addr, m, depth=10, on_error=errors.append)
-    s = Sender()
-    try:
-        s.targets = (addr,)
-        s.send(b'x')
-        assert wait_for(lambda: errors) and isinstance(errors[0], RuntimeError)
-        r.thread.join(2.0)
-        assert not r.thread.is_alive()
-    finally:
-        r.close()
-        s.close()
+    m.deliver = boom
+    s.send(b'x')
+    assert wait_for(lambda: errors) and isinstance(errors[0], RuntimeError)
+    r.thread.join(2.0)
+    assert not r.thread.is_alive()
 
 
 def test_raise_priority_is_harmless_without_real_time_scheduling():
