@@ -327,8 +327,14 @@ def run_nodes(factories: Iterable[Callable[[], Any]], args: list[str] | None = N
     status 2. A node may define ``close()``, called before destruction (e.g. to zero the motor
     or finalise a file). Priority / affinity: :func:`apply_scheduling`; DDS transport:
     :func:`rwpend_ros.transport.apply_transport` (UDP by default; exit status 2 for a bad
-    ``RWPEND_TRANSPORT``).
+    ``RWPEND_TRANSPORT``, and for an ``RWPEND_HOST_BUS`` other than 0 or 1, before anything is
+    changed).
     """
+    try:
+        hostbus.enabled()       # a bad RWPEND_HOST_BUS: refused before anything is changed
+    except ValueError as exc:
+        print(f'error: {exc}', file=sys.stderr, flush=True)
+        return 2
     apply_transport_or_exit()   # before rclpy.init: Fast DDS reads it when the participant is made
     apply_scheduling()   # before rclpy.init: the DDS threads inherit it
     rclpy.init(args=args)

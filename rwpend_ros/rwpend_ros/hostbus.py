@@ -56,9 +56,12 @@ MAX_DATAGRAM = 65536
 
 
 def enabled(env=None) -> bool:
-    """False when ``RWPEND_HOST_BUS=0``."""
+    """``RWPEND_HOST_BUS``: 1 (or unset) = on, 0 = off; ValueError for anything else."""
     env = os.environ if env is None else env
-    return env.get('RWPEND_HOST_BUS', '1').strip() != '0'
+    value = env.get('RWPEND_HOST_BUS', '1').strip() or '1'
+    if value not in ('0', '1'):
+        raise ValueError(f"RWPEND_HOST_BUS={env['RWPEND_HOST_BUS']!r}: expected 0 (off) or 1 (on)")
+    return value == '1'
 
 
 def address(domain_id: int, topic: str, node_fqn: str) -> bytes:

@@ -247,4 +247,8 @@ def test_raise_priority_is_harmless_without_real_time_scheduling():
 
 def test_enabled_by_environment():
     assert hostbus.enabled({}) and hostbus.enabled({'RWPEND_HOST_BUS': '1'})
-    assert not hostbus.enabled({'RWPEND_HOST_BUS': '0'})
+    assert hostbus.enabled({'RWPEND_HOST_BUS': ''})
+    assert not hostbus.enabled({'RWPEND_HOST_BUS': ' 0 '})
+    for bad in ('off', 'yes', '2'):
+        with pytest.raises(ValueError, match='RWPEND_HOST_BUS'):
+            hostbus.enabled({'RWPEND_HOST_BUS': bad})

@@ -60,3 +60,11 @@ def test_nothing_local_before_the_executor_runs(nodes):
     BUS.thread = None
     pub.publish(MotorCommand(seq=1, u=0.0))
     assert got == []                                 # DDS only (nobody spins here)
+
+
+def test_a_bad_host_bus_setting_stops_the_process_before_rclpy(monkeypatch, capsys):
+    from rwpend_ros.common import run_nodes
+    monkeypatch.setenv('RWPEND_HOST_BUS', 'off')
+    built = []
+    assert run_nodes([lambda: built.append(1)]) == 2
+    assert built == [] and 'RWPEND_HOST_BUS' in capsys.readouterr().err
