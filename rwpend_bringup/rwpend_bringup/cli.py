@@ -205,7 +205,9 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         plant_spec = NodeSpec('driver', NODE_MODULES['driver'], {**rig, **params['driver']}, stop_rank=3)
     else:
         raise ValueError(f"--plant must be 'sim' or 'serial:PORT', got {plant!r}")
-    sim_time = {'use_sim_time': True} if a.lockstep else {}
+    # lockstep: sim time; the estimator and controller take it from the samples' stamps rather
+    # than /clock (rwpend_ros.common.SampleTime: one DDS message less per sample and node)
+    sim_time = {'use_sim_time': True, 'time_from_samples': True} if a.lockstep else {}
     specs = [plant_spec,
              NodeSpec('estimator', NODE_MODULES['estimator'], {**rig, **sim_time, **params['estimator']},
                       stop_rank=2)]

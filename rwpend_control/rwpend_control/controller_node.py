@@ -52,7 +52,7 @@ from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher,
                                RwNode, declare_rig, diagnostic_status, fast_path_values, local_subscription,
-                               run_node)
+                               run_node, sample_time)
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
 
@@ -73,6 +73,7 @@ class ControllerNode(RwNode):
         """node_kwargs go to rclpy Node (context, parameter_overrides, namespace) for tests."""
         super().__init__('controller', **node_kwargs)
         self.rig = declare_rig(self)
+        self.sample_time = sample_time(self)   # lockstep: ROS time from the samples' stamps
         dyn = dict(dynamic_typing=True)
         self.declare_parameter('mode', 'off', ParameterDescriptor(
             description='operating mode: ' + ', '.join(MODES), **dyn))
@@ -277,6 +278,8 @@ class ControllerNode(RwNode):
         sample); the command goes out as bytes too, with the state's header (stamp and
         frame_id) copied through, or now if the state's stamp is zero."""
         rx = time.monotonic_ns() if self.trace is not None else 0
+        if self.sample_time is not None:
+            self.sample_time(data)
         now_t = self.get_clock().now()
         now = now_t.nanoseconds * 1e-9
         try:

@@ -32,7 +32,8 @@ from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher, RwNode,
-                               declare_rig, diagnostic_status, fast_path_values, local_subscription, run_node)
+                               declare_rig, diagnostic_status, fast_path_values, local_subscription, run_node,
+                               sample_time)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
                                           make_estimator, switch_estimator)
 
@@ -62,6 +63,7 @@ class EstimatorNode(RwNode):
         """node_kwargs go to rclpy Node (e.g. context, parameter_overrides, namespace) for tests."""
         super().__init__('estimator', **node_kwargs)
         self.rig = declare_rig(self)
+        self.sample_time = sample_time(self)   # lockstep: ROS time from the samples' stamps
         defaults = asdict(EstimatorConfig())
         for name in CONFIG_NAMES:
             self.declare_parameter(name, defaults[name], ParameterDescriptor(
@@ -194,6 +196,8 @@ class EstimatorNode(RwNode):
                            msg.pendulum_counts, msg.motor_counts))
 
     def on_encoders_raw(self, data: bytes) -> None:
+        if self.sample_time is not None:
+            self.sample_time(data)
         try:
             msg = Sample(*wire.unpack_encoders(data))
         except (struct.error, IndexError) as exc:   # truncated bytes: counted, nothing else changes

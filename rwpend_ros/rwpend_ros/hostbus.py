@@ -39,6 +39,7 @@ from __future__ import annotations
 import errno
 import hashlib
 import os
+import select
 import socket
 import threading
 from collections import deque
@@ -53,6 +54,10 @@ KEEP = 1024
 #: largest message sent fast (the loop's messages are < 200 bytes); a bigger one goes by DDS
 #: alone (Sender.send), so a receiver never reads a cut datagram
 MAX_DATAGRAM = 65536
+#: fast-only messages a syncing :class:`Merge` holds at most while it waits for their marker
+HOLD = 32
+#: ... and seconds its receiving thread waits for the marker before it delivers them anyway
+HOLD_S = 0.05
 
 
 def enabled(env=None) -> bool:
@@ -97,28 +102,58 @@ class Merge:
     *syncing* (DDS delivers, fast messages are only remembered) and *fast* (fast delivers, DDS
     copies of those are dropped). Syncing -> fast when the DDS copy of the newest fast message
     arrives: DDS has then delivered everything up to it. Fast -> syncing when DDS brings a
-    message the fast path did not deliver (it is delivered)."""
+    message the fast path did not deliver (it is delivered).
 
-    __slots__ = ('deliver', 'fast_mode', 'pending', 'newest_fast', 'fast', 'dds', 'duplicates',
-                 'skipped', 'resyncs')
+    A *fast-only* message (the publisher did not write it to DDS: every subscriber of the topic
+    takes the fast path, :meth:`Sender.send`) carries ``marker``, the publisher's last message
+    written to DDS (None: none yet). In fast mode it is delivered at once. In syncing mode it
+    is delivered once DDS has brought the marker; until then it and the fast messages after it
+    are *held* (at most :data:`HOLD`: a marker DDS never brings -- a best-effort or keep-last
+    reader lost it -- does not stop the stream)."""
+
+    __slots__ = ('deliver', 'drain', 'fast_mode', 'pending', 'newest_fast', 'held', 'waiting', 'last_dds',
+                 'fast', 'dds', 'duplicates', 'skipped', 'resyncs')
 
     def __init__(self, deliver: Callable[[bytes], None]) -> None:
         self.deliver = deliver
+        #: takes what the fast path has brought and not handed over yet (Receiver.drain)
+        self.drain: Callable[[], None] | None = None
         self.fast_mode = False
         self.pending: deque[bytes] = deque(maxlen=KEEP)
         self.newest_fast: bytes | None = None
+        self.held: list[tuple[bytes, bool]] = []   # syncing: fast messages waiting for the marker
+        self.waiting: bytes | None = None          # ... the marker
+        self.last_dds: bytes | None = None         # the newest message DDS brought
         self.fast = 0          # delivered from the fast path
         self.dds = 0           # delivered from DDS
         self.duplicates = 0    # DDS copies dropped
         self.skipped = 0       # fast messages not delivered (keep-last depth)
         self.resyncs = 0       # fast -> syncing
 
-    def from_fast(self, data: bytes, deliver: bool = True) -> None:
+    def from_fast(self, data: bytes, deliver: bool = True, fast_only: bool = False,
+                  marker: bytes | None = None) -> None:
         """A message from the fast path; ``deliver=False``: taken but not delivered (an older
-        message of a keep-last backlog; its DDS copy is dropped all the same)."""
+        message of a keep-last backlog; its DDS copy is dropped all the same); ``fast_only``:
+        not written to DDS, ``marker`` the publisher's last message that was."""
         if not self.fast_mode:
-            self.newest_fast = data
-            return
+            if self.held:
+                self.held.append((data, deliver))
+                if len(self.held) >= HOLD:       # the marker is not coming
+                    self._flush()
+                return
+            if not fast_only:
+                self.newest_fast = data
+                return
+            if marker is not None and marker != self.last_dds:
+                self.held.append((data, deliver))
+                self.waiting = marker
+                return
+            self.fast_mode = True            # DDS brought all the publisher wrote to it
+            self.pending.clear()
+            self.newest_fast = None
+        self._take(data, deliver)
+
+    def _take(self, data: bytes, deliver: bool) -> None:
         self.pending.append(data)
         if deliver:
             self.fast += 1
@@ -126,7 +161,29 @@ class Merge:
         else:
             self.skipped += 1
 
+    def flush_held(self) -> None:
+        """Deliver the held messages without their marker (it did not come in time)."""
+        if self.held:
+            self._flush()
+
+    def _flush(self) -> None:
+        """Syncing -> fast, delivering the held messages (the marker's copy, should it still
+        come, is dropped like a duplicate)."""
+        held, self.held = self.held, []
+        self.fast_mode = True
+        self.pending.clear()
+        if self.waiting is not None:
+            self.pending.append(self.waiting)
+        self.waiting = self.newest_fast = None
+        for data, deliver in held:
+            self._take(data, deliver)
+
     def from_dds(self, data: bytes) -> None:
+        """A message from DDS. The fast path's datagrams waiting in the socket are taken first:
+        the publisher sent them before it wrote ``data`` to DDS."""
+        if self.drain is not None:
+            self.drain()
+        self.last_dds = data
         if self.fast_mode:
             if take_copy(self.pending, data):
                 self.duplicates += 1
@@ -135,9 +192,17 @@ class Merge:
             self.pending.clear()
             self.newest_fast = None
             self.resyncs += 1
+        elif self.held and any(h == data for h, _ in self.held):
+            self._flush()                # DDS brought a held one: the marker is behind it
+            take_copy(self.pending, data)
+            self.duplicates += 1
+            return
         self.dds += 1
         self.deliver(data)
-        if self.newest_fast is not None and data == self.newest_fast:
+        if self.held:
+            if data == self.waiting:
+                self._flush()
+        elif self.newest_fast is not None and data == self.newest_fast:
             self.fast_mode = True
             self.newest_fast = None
 
@@ -170,6 +235,8 @@ class Receiver:
         _LOCAL.add(addr)
         _RECEIVERS.append(self)
         self.closed = False
+        self.malformed = 0       # datagrams that are not ours (ignored)
+        merge.drain = self.drain
         self.thread = threading.Thread(target=self._run, name='hostbus-rx', daemon=True)
         self.thread.start()
 
@@ -177,30 +244,54 @@ class Receiver:
         raise_priority()
         if self.on_start is not None:
             self.on_start(threading.get_ident())
-        sock, merge, depth = self.sock, self.merge, self.depth
+        poller = select.poll()
+        poller.register(self.sock, select.POLLIN)
+        merge = self.merge
+        while True:
+            # the datagrams stay in the socket until the lock is held: a DDS copy taken
+            # meanwhile drains them first (Merge.from_dds), so nothing sent before it is behind it
+            try:
+                # only this thread fills merge.held: then wait for the marker HOLD_S at most
+                events = poller.poll(HOLD_S * 1000 if merge.held else None)
+            except OSError:
+                return
+            if any(ev & (select.POLLNVAL | select.POLLERR) for _, ev in events):
+                return               # closed
+            if not self._locked(self.drain if events else merge.flush_held):
+                return
+
+    def drain(self) -> None:
+        """Hand every datagram waiting in the socket to the merge (the lock held); of more
+        than ``depth``, the older ones are taken without being delivered (keep-last)."""
+        batch = []
         while True:
             try:
-                first = sock.recv(MAX_DATAGRAM)
+                batch.append(self.sock.recv(MAX_DATAGRAM, socket.MSG_DONTWAIT))
             except OSError:
-                return               # closed
-            with CALLBACK_LOCK:
-                if self.closed:
-                    return
-                batch = [first]
-                while True:          # what else came meanwhile
-                    try:
-                        batch.append(sock.recv(MAX_DATAGRAM, socket.MSG_DONTWAIT))
-                    except OSError:
-                        break
-                try:
-                    n_old = len(batch) - depth
-                    for i, data in enumerate(batch):
-                        merge.from_fast(data, deliver=i >= n_old)
-                except BaseException as exc:  # noqa: BLE001 - reported like an executor callback's
-                    self.closed = True
-                    if self.on_error is not None:
-                        self.on_error(exc)
-                    return
+                break
+        n_old = len(batch) - self.depth
+        for i, datagram in enumerate(batch):
+            message = unpack(datagram)
+            if message is None:
+                self.malformed += 1
+                continue
+            data, fast_only, marker = message
+            self.merge.from_fast(data, i >= n_old, fast_only, marker)
+
+    def _locked(self, fn, *args) -> bool:
+        """``fn(*args)`` holding the lock; False when the thread must end (closed, or the
+        callback raised: reported to ``on_error``, DDS delivers from then on)."""
+        with CALLBACK_LOCK:
+            if self.closed:
+                return False
+            try:
+                fn(*args)
+            except BaseException as exc:  # noqa: BLE001 - reported like an executor callback's
+                if self.on_error is not None:
+                    self.on_error(exc)
+                self.close()     # senders find it gone: DDS alone from then on
+                return False
+        return True
 
     def close(self) -> None:
         with CALLBACK_LOCK:
@@ -213,6 +304,31 @@ class Receiver:
         self.sock.close()
         if self in _RECEIVERS:
             _RECEIVERS.remove(self)
+
+
+def pack(data: bytes, fast_only: bool = False, marker: bytes | None = None) -> bytes:
+    """The datagram of ``data``: a first byte 0 (the message is written to DDS too), 1 (fast
+    only, no marker: the publisher never wrote to DDS) or 2 (fast only, then the marker's length
+    in 4 bytes little-endian, the marker), then the message."""
+    if not fast_only:
+        return b'\0' + data
+    if marker is None:
+        return b'\1' + data
+    return b'\2' + len(marker).to_bytes(4, 'little') + marker + data
+
+
+def unpack(datagram: bytes) -> tuple[bytes, bool, bytes | None] | None:
+    """(message, fast_only, marker) of a datagram of :func:`pack`; None if it is not one."""
+    kind = datagram[:1]
+    if kind == b'\0':
+        return datagram[1:], False, None
+    if kind == b'\1':
+        return datagram[1:], True, None
+    if kind == b'\2' and len(datagram) >= 5:
+        n = int.from_bytes(datagram[1:5], 'little')
+        if 5 + n <= len(datagram):
+            return datagram[5 + n:], True, datagram[5:5 + n]
+    return None
 
 
 def raise_priority() -> None:
@@ -251,24 +367,38 @@ class Sender:
         self.failed = 0          # sends that failed for another reason than an absent receiver
         self.dropped = False     # a target was dropped (failed) since the last set_targets
         self.too_big = 0         # messages over MAX_DATAGRAM, left to DDS
+        #: the newest message written to DDS (the marker of the fast-only ones after it)
+        self.marker: bytes | None = None
+        #: the targets changed since the last DDS write: the next message goes to DDS too
+        self.fresh = True
 
     def set_targets(self, addrs: Iterable[bytes]) -> None:
-        self.targets = tuple(a for a in dict.fromkeys(addrs) if a not in _LOCAL)
+        targets = tuple(a for a in dict.fromkeys(addrs) if a not in _LOCAL)
+        if targets != self.targets:
+            self.fresh = True
+        self.targets = targets
         self.dropped = False
 
-    def send(self, data: bytes) -> None:
-        if len(data) > MAX_DATAGRAM:
+    def send(self, data: bytes, fast_only: bool = False, marker: bytes | None = None) -> bool:
+        """Send ``data`` to every target; ``fast_only``: it will not be written to DDS,
+        ``marker`` is the last message that was. True when every target got it (a target whose
+        send fails is gone from ``targets``)."""
+        datagram = pack(data, fast_only, marker)
+        if len(datagram) > MAX_DATAGRAM:
             self.too_big += 1
-            return
+            return False
+        ok = True
         for addr in self.targets:
             try:
-                self.sock.sendto(data, socket.MSG_DONTWAIT, addr)
+                self.sock.sendto(datagram, socket.MSG_DONTWAIT, addr)
                 self.sent += 1
-            except OSError as exc:   # no such receiver (any more), its socket full, too big
+            except OSError as exc:   # no such receiver (any more), its socket full
+                ok = False
                 self.targets = tuple(a for a in self.targets if a != addr)
                 if exc.errno not in (errno.ECONNREFUSED, errno.ENOENT):
                     self.failed += 1
                     self.dropped = True
+        return ok
 
     def close(self) -> None:
         self.targets = ()

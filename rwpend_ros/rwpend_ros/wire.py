@@ -45,6 +45,12 @@ def header_end(data: bytes) -> int:
     return 4 + 12 + _HEAD.unpack_from(data, 4)[2]
 
 
+def message_stamp_ns(data: bytes) -> int:
+    """header.stamp in ns of a message (encapsulation included) that starts with a Header."""
+    sec, nanosec, _ = _HEAD.unpack_from(data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
 def header_bytes(data: bytes) -> bytes:
     """The wire bytes of the std_msgs/Header at the start of a message (no encapsulation)."""
     return bytes(data[4:header_end(data)])

@@ -252,3 +252,164 @@ def test_enabled_by_environment():
     for bad in ('off', 'yes', '2'):
         with pytest.raises(ValueError, match='RWPEND_HOST_BUS'):
             hostbus.enabled({'RWPEND_HOST_BUS': bad})
+
+
+def test_pack_unpack_and_foreign_datagrams():
+    assert hostbus.unpack(hostbus.pack(b'abcd')) == (b'abcd', False, None)
+    assert hostbus.unpack(hostbus.pack(b'abcd', True)) == (b'abcd', True, None)
+    assert hostbus.unpack(hostbus.pack(b'abcd', True, b'mark')) == (b'abcd', True, b'mark')
+    assert hostbus.unpack(hostbus.pack(b'', True, b'')) == (b'', True, b'')
+    for foreign in (b'', b'\x07abc', b'\x02\xff\xff\x00\x00ab', b'\x02ab'):
+        assert hostbus.unpack(foreign) is None
+
+
+def test_merge_fast_only_in_fast_mode_is_delivered_at_once():
+    got = []
+    m = Merge(got.append)
+    m.from_fast(b'1'); m.from_dds(b'1')
+    for i in range(2, KEEP + 50):       # DDS carries none of them
+        m.from_fast(b'%d' % i, fast_only=True, marker=b'1')
+    assert got == [b'%d' % i for i in range(1, KEEP + 50)] and m.fast_mode
+    assert len(m.pending) == KEEP and m.dds == 1 and m.fast == KEEP + 48
+
+
+def test_merge_fast_only_syncs_on_its_marker():
+    got = []
+    m = Merge(got.append)
+    m.from_dds(b'1')                    # the publisher's last DDS write is already here
+    m.from_fast(b'2', fast_only=True, marker=b'1')
+    assert got == [b'1', b'2'] and m.fast_mode
+    got.clear()
+    m = Merge(got.append)               # a publisher that never wrote to DDS
+    m.from_fast(b'1', fast_only=True)
+    assert got == [b'1'] and m.fast_mode
+
+
+def test_merge_holds_fast_only_messages_until_dds_brings_the_marker():
+    got = []
+    m = Merge(got.append)
+    m.from_fast(b'5')                   # both ways: remembered
+    m.from_fast(b'6', fast_only=True, marker=b'5')
+    m.from_fast(b'7')                   # held behind 6 (both ways: its DDS copy comes later)
+    m.from_fast(b'8', fast_only=True, marker=b'7')
+    assert got == [] and len(m.held) == 3
+    m.from_dds(b'5')                    # the marker: 5 from DDS, then the held ones
+    assert got == [b'5', b'6', b'7', b'8'] and m.fast_mode and not m.held
+    m.from_dds(b'7')                    # 7's DDS copy: a duplicate
+    assert got == [b'5', b'6', b'7', b'8'] and m.duplicates == 1 and m.fast_mode
+
+
+def test_merge_held_messages_go_when_the_marker_is_lost():
+    got = []
+    m = Merge(got.append)
+    m.from_fast(b'6', fast_only=True, marker=b'5')
+    m.from_fast(b'7')
+    m.from_dds(b'7')                    # DDS lost 5 but brings 7, which is held: all go
+    assert got == [b'6', b'7'] and m.fast_mode and m.duplicates == 1
+    got.clear()
+    m = Merge(got.append)
+    m.from_fast(b'6', fast_only=True, marker=b'5')
+    m.flush_held()                      # the receiving thread's timeout
+    m.from_dds(b'5')                    # too late: dropped, not delivered after 6
+    assert got == [b'6'] and m.fast_mode
+    got.clear()
+    m = Merge(got.append)
+    for i in range(hostbus.HOLD):       # a bounded hold
+        m.from_fast(b'%d' % i, fast_only=True, marker=b'x')
+    assert len(got) == hostbus.HOLD and not m.held
+
+
+def test_merge_keep_last_skips_while_holding():
+    got = []
+    m = Merge(got.append)
+    m.from_fast(b'1', deliver=False, fast_only=True, marker=b'0')
+    m.from_fast(b'2', fast_only=True, marker=b'0')
+    m.from_dds(b'0')
+    assert got == [b'0', b'2'] and m.skipped == 1
+
+
+@pytest.mark.parametrize('seed', range(60))
+def test_merge_random_interleavings_with_fast_only_phases(seed):
+    """As above, and the publisher leaves DDS out (fast only) in some phases (no other
+    subscriber), the first message after a change of targets going both ways. The receiving
+    thread takes datagrams at random instants; a DDS copy first drains the datagrams sent before
+    it (Merge.drain); the hold timeout is modelled. Delivered: strictly increasing, nothing lost
+    that DDS carried or the fast path carried alone."""
+    rng = random.Random(seed)
+    n = 400
+    hold_timeout = 3.0
+    events = []
+    t_fast = t_dds = 0.0
+    stopped = False
+    resume_after = None
+    fresh = True
+    only_phase = False
+    marker = None
+    must_arrive = set()
+    for i in range(n):
+        t = i * 1.0
+        if rng.random() < 0.03:
+            only_phase = not only_phase          # a recorder left / joined
+        if not stopped and rng.random() < 0.02:
+            stopped = True
+        elif stopped and rng.random() < 0.3:
+            stopped, resume_after, fresh = False, t_dds, True
+        fast = not stopped and (resume_after is None or t > resume_after)
+        fast_only = fast and only_phase and not fresh
+        if fast:
+            t_fast = max(t_fast, t + rng.uniform(0.0, 2.5))
+            events.append((t_fast, 0, i, fast_only, marker))
+        if fast_only:
+            must_arrive.add(i)
+            continue
+        marker, fresh = str(i).encode(), False
+        if rng.random() > 0.05:                    # else: dropped by a keep-last DDS reader
+            t_dds = max(t_dds, t + rng.uniform(0.0, 4.0))
+            events.append((t_dds, 1, i, False, None))
+            must_arrive.add(i)
+    events.sort(key=lambda e: e[:2])
+    socket_queue = [e for e in events if e[1] == 0]     # datagrams, in the order sent
+    got = []
+    m = Merge(lambda d: got.append(int(d)))
+    held_since = None
+
+    def take(upto):          # the receiving thread / Merge.drain: datagrams of messages <= upto
+        nonlocal held_since
+        while socket_queue and socket_queue[0][2] <= upto:
+            t, _, i, fast_only, mark = socket_queue.pop(0)
+            was_holding = bool(m.held)
+            m.from_fast(str(i).encode(), fast_only=fast_only, marker=mark)
+            if m.held and not was_holding:
+                held_since = t
+    m.drain = lambda: None
+    for t, path, i, _, _ in events:
+        if m.held and held_since is not None and t > held_since + hold_timeout:
+            m.flush_held()
+        if path:
+            take(i)                              # sent before the DDS write of i
+            m.from_dds(str(i).encode())
+        else:
+            take(i)
+    m.flush_held()
+    assert got == sorted(set(got)), 'once each, in order'
+    assert must_arrive <= set(got), 'nothing lost'
+
+
+def test_receiver_delivers_held_messages_when_the_marker_does_not_come(fast_pair):
+    got, m, r, s = fast_pair('hold')
+    m.fast_mode = False                  # syncing, and DDS never brings the marker
+    s.send(b'a', fast_only=True, marker=b'never')
+    time.sleep(hostbus.HOLD_S / 2)
+    assert got == []
+    assert wait_for(lambda: got == [b'a'])
+    assert m.fast_mode
+
+
+def test_sender_reports_whether_every_target_got_it(fast_pair):
+    got, m, r, s = fast_pair('ok')
+    assert s.send(b'1', fast_only=True)
+    s.targets = s.targets + (unique_addr('gone'),)
+    assert not s.send(b'2', fast_only=True) and s.targets == (r.addr,)
+    assert wait_for(lambda: got == [b'1', b'2'])
+    s.set_targets([r.addr])
+    assert s.fresh is True or s.targets == (r.addr,)
