@@ -128,7 +128,8 @@ def test_offline_reestimation_matches_live(lockstep_bags, tmp_path, ros_env):
 
 def test_separate_processes_take_the_same_host_fast_path(lockstep_bags):
     """The loop's messages between the processes of a lockstep run went through the fast path
-    (rwpend_ros.hostbus), each delivered once: the nodes' /diagnostics count them."""
+    (rwpend_ros.hostbus), each delivered once, and mostly not written to DDS at all: the
+    nodes' /diagnostics count them."""
     from test_safety_system import diagnostics
     last = {}
     for _, name, _, _, values in diagnostics(lockstep_bags[0][0]):
@@ -140,7 +141,9 @@ def test_separate_processes_take_the_same_host_fast_path(lockstep_bags):
     for (name, key), c in last.items():
         fast, dds, dup = int(c['fast']), int(c['dds']), int(c['duplicates'])
         assert fast > 0.5 * (fast + dds), (name, key, c)     # most of them fast
-        assert dup <= fast, (name, key, c)                   # only copies of fast ones dropped
+        # the recorder takes the fast path too: every subscriber does, so the publishers leave
+        # DDS out (fast only) and few DDS copies come to drop (each one came before)
+        assert dup <= 0.5 * fast, (name, key, c)
 
 
 def test_live_tools_against_a_running_stack(ros_env):

@@ -4,19 +4,43 @@ Thin rclpy layer over :class:`rwpend_bag.writer.ThreadedBagWriter`: the subscrip
 only enqueue (topic, wire bytes, receive time); a writer thread does the MCAP work. Topics that
 appear later are picked up (graph polled every 0.5 s). Each subscription uses the publishers'
 reliability/durability and a keep-last 1000 history.
+
+The topics our nodes publish at the sample rate (:data:`FAST_TYPES`) are taken through the
+same-host fast path as well (:func:`rwpend_ros.common.local_subscription`): with the recorder
+on it too, every subscriber of those topics on this host takes it, and their publishers leave
+DDS out -- a recorded loop costs no DDS message per sample (PERFORMANCE.md, 15.). The
+recorder's fast receivers have no thread each: one thread drains them all every
+:data:`FAST_POLL_S` (a wake-up per 2 ms, not one per message), and a message's log time is
+the kernel's time of its arrival in the socket, so the bag's log times keep the order in which
+the messages reached the recorder across topics (offline re-estimation replays them in that
+order). Each message is recorded once, in order; one the recorder's socket cannot take goes
+to it through DDS.
 """
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from rwpend_ros import hostbus
+from rwpend_ros.common import local_subscription
+from rwpend_ros.hostbus import CALLBACK_LOCK
+
 from . import msgdefs
 from .writer import INFINITE_TIME, ThreadedBagWriter
 
 DEPTH = 1000
+#: period (s) of the thread that drains the fast path's sockets; a socket holds 10 datagrams
+#: (net.unix.max_dgram_qlen): 2 ms is 2-4 samples per topic at 1-2 kHz
+FAST_POLL_S = 0.002
+#: types our nodes publish at the sample rate with rwpend_ros.common.LocalPublisher (the
+#: same-host fast path): the loop's, the simulator's truth and clock, the estimator's joint states
+FAST_TYPES = frozenset({'rwpend_msgs/msg/EncoderCounts', 'rwpend_msgs/msg/StateEstimate',
+                        'rwpend_msgs/msg/MotorCommand', 'rwpend_msgs/msg/PlantState',
+                        'sensor_msgs/msg/JointState', 'rosgraph_msgs/msg/Clock'})
 POLL_S = 0.5
 DRAIN_IDLE_S = 0.25    # on stop: keep recording until nothing arrived for this long ...
 DRAIN_LIMIT_S = 2.0    # ... or this long at most (a second Ctrl-C ends it at once)
@@ -50,6 +74,11 @@ class Recorder(Node):
         self.skipped: dict[str, str] = {}
         self._closed = False
         self._received = [0]
+        self.fast = hostbus.enabled()
+        self._batch: list[tuple[int, str, bytes]] = []   # fast topics: (log time, topic, data)
+        self._last_ns: dict[str, int] = {}
+        self._fast_stop = threading.Event()
+        self._fast_thread: threading.Thread | None = None
         self.create_timer(POLL_S, self.discover)
         self.get_logger().info(f'recording to {out_dir} '
                                f'({"all topics" if record_all else ", ".join(sorted(self.wanted))})')
@@ -81,8 +110,17 @@ class Recorder(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
                              else DurabilityPolicy.VOLATILE)
             self.writer.add_topic(name, type_name, [qos_dict(q) for q in offered])
-            self.subs[name] = self.create_subscription(
-                cls, name, self._receiver(name), qos, raw=True)
+            if type_name in FAST_TYPES and self.fast:
+                self._last_ns[name] = 0
+                self.subs[name] = local_subscription(self, cls, name, self._fast_receiver(name), qos,
+                                                     intra=False, polled=True)
+                if self._fast_thread is None:
+                    self._fast_thread = threading.Thread(target=self._fast_loop, name='recorder-fast',
+                                                         daemon=True)
+                    self._fast_thread.start()
+            else:
+                self.subs[name] = self.create_subscription(
+                    cls, name, self._receiver(name), qos, raw=True)
             self.get_logger().info(f'recording {name} [{type_name}] '
                                    f'{"reliable" if reliable else "best effort"}')
 
@@ -94,6 +132,47 @@ class Recorder(Node):
             _put(_n, data, _now())
             _count[0] += 1
         return receive
+
+    def _fast_receiver(self, name: str):
+        """Callback of a fast topic (either path; CALLBACK_LOCK held): into the batch, with the
+        arrival time in the socket (DDS: now), kept increasing per topic."""
+        last = self._last_ns
+
+        def receive(data, _n=name):
+            t = hostbus.delivery_stamp() or time.time_ns()
+            if t <= last[_n]:
+                t = last[_n] + 1
+            last[_n] = t
+            self._batch.append((t, _n, data))
+        return receive
+
+    def poll_fast(self) -> int:
+        """Drain the fast path's sockets; the batch goes to the writer in log-time order.
+        Returns the most datagrams one socket held."""
+        most = 0
+        with CALLBACK_LOCK:
+            for receiver in list(getattr(self, 'hostbus_receivers', {}).values()):
+                if receiver is not None and not receiver.closed:
+                    most = max(most, receiver.drain())
+            batch, self._batch = self._batch, []
+        if batch:
+            batch.sort(key=lambda item: item[0])
+            put = self.writer.put
+            for t, name, data in batch:
+                put(name, data, t)
+            self._received[0] += len(batch)
+        return most
+
+    def _fast_loop(self) -> None:
+        """Every FAST_POLL_S; sooner while a socket comes back more than a third full (a
+        lockstep run at several times real time)."""
+        wait = FAST_POLL_S
+        while not self._fast_stop.wait(wait):
+            try:
+                wait = FAST_POLL_S if self.poll_fast() <= 3 else FAST_POLL_S / 8
+            except Exception as exc:  # noqa: BLE001 - reported; DDS still delivers
+                self.get_logger().error(f'fast path: {exc!r}')
+                return
 
     def drain(self, executor, idle: float = DRAIN_IDLE_S, limit: float = DRAIN_LIMIT_S,
               abort=lambda: False) -> int:
@@ -116,6 +195,11 @@ class Recorder(Node):
         if self._closed:
             return {}
         self._closed = True
+        self._fast_stop.set()
+        if self._fast_thread is not None:
+            self._fast_thread.join(1.0)
+        self.poll_fast()             # what is still in the sockets and the batch
+        hostbus.close_all()          # nothing comes through the fast path after this
         for sub in list(self.subs.values()):
             try:
                 self.destroy_subscription(sub)
@@ -150,6 +234,11 @@ def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool) -> in
     from rwpend_ros.common import apply_scheduling, freeze_gc, make_executor
     from rwpend_ros.transport import apply_transport_or_exit
     apply_transport_or_exit()  # before rclpy.init
+    try:
+        hostbus.enabled()
+    except ValueError as exc:
+        print(f'rwpend record: {exc}', file=sys.stderr)
+        return 2
     apply_scheduling()
     # the bag-writer thread works through its queue in batches (ThreadedBagWriter.poll_s):
     # hand the GIL over to the receiving thread within 0.5 ms (default 5 ms), so a batch does

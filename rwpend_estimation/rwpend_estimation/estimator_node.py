@@ -107,7 +107,7 @@ class EstimatorNode(RwNode):
         self.add_post_set_parameters_callback(self.on_parameters_set)
         # state reaches a controller in this process directly (composed mode, rwpend_ros.intra)
         self.pub_state = LocalPublisher(self, StateEstimate, 'state', QOS_CONTROL_PUB)
-        self.pub_joints = self.create_publisher(JointState, 'joint_states', QOS_CONTROL_PUB)
+        self.pub_joints = LocalPublisher(self, JointState, 'joint_states', QOS_CONTROL_PUB)   # recorder: fast path
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire): no message
         # objects built or converted field by field (measured: PERFORMANCE.md)

@@ -262,15 +262,18 @@ class LocalPublisher:
 
 
 def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], None], qos,
-                       before_dds: bool = True, intra: bool = True, host: bool = True):
+                       before_dds: bool = True, intra: bool = True, host: bool = True,
+                       polled: bool = False):
     """A raw subscription (``callback`` takes wire bytes, holding
     :data:`rwpend_ros.hostbus.CALLBACK_LOCK`) that also takes the messages of a
     :class:`LocalPublisher` directly: from another node of this process (``intra``,
     :mod:`rwpend_ros.intra`; ``before_dds`` see :meth:`rwpend_ros.intra.LocalBus.subscribe`) and
     from another process of this host (``host``, :mod:`rwpend_ros.hostbus`, received by a
     thread of its own). Each message is delivered once, in the publisher's order (the DDS copies
-    of those are dropped). Returns the rclpy subscription; the fast path's
-    :class:`rwpend_ros.hostbus.Merge` is in ``node.hostbus_merges[topic]``."""
+    of those are dropped). ``polled``: the fast path's receiver has no thread of its own
+    (:class:`rwpend_ros.hostbus.Receiver`, the recorder). Returns the rclpy subscription; the
+    fast path's :class:`rwpend_ros.hostbus.Merge` is in ``node.hostbus_merges[topic]``, its
+    receiver in ``node.hostbus_receivers[topic]``."""
     topic_name = node.resolve_topic_name(topic)
     local = BUS.subscribe(topic_name, callback, before_dds) if intra else None
     deliver = local.run if local is not None else callback
@@ -282,7 +285,7 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
         depth = qos.depth if qos.history == HistoryPolicy.KEEP_LAST else 1 << 30
         try:
             receiver = hostbus.Receiver(addr, merge, depth, on_error=_host_callback_failed,
-                                        on_start=BUS.extra_threads.add)
+                                        on_start=BUS.extra_threads.add, polled=polled)
         except OSError as exc:
             node.get_logger().warn(f'{topic_name}: no same-host fast path ({exc}); DDS only')
             merge = None
@@ -304,7 +307,9 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
     if merge is not None:
         if not hasattr(node, 'hostbus_merges'):
             node.hostbus_merges = {}
+            node.hostbus_receivers = {}
         node.hostbus_merges[topic_name] = merge
+        node.hostbus_receivers[topic_name] = receiver
     return sub
 
 

@@ -41,6 +41,7 @@ import hashlib
 import os
 import select
 import socket
+import struct
 import threading
 from collections import deque
 from typing import Callable, Iterable
@@ -92,6 +93,20 @@ def node_fqn(namespace: str, name: str) -> str:
 #: (:mod:`rwpend_ros.intra` or DDS serves subscribers of its own process; a socket between two
 #: threads of one process was measured and is slower, PERFORMANCE.md, 14.)
 _LOCAL: set[bytes] = set()
+#: SO_TIMESTAMPNS (Linux; not in Python's socket module): the kernel stamps a datagram with the
+#: time it was queued to the socket
+SO_TIMESTAMPNS = 35
+_TIMESPEC = struct.Struct('@qq')
+_CMSG_SPACE = socket.CMSG_SPACE(_TIMESPEC.size)
+_STAMP = threading.local()
+_STAMP.ns = 0
+
+
+def delivery_stamp() -> int:
+    """While a polled receiver's message is delivered (in the callback, on that thread): the
+    time it arrived in the socket (ns since the epoch, CLOCK_REALTIME); 0 otherwise (DDS, a
+    thread receiver)."""
+    return getattr(_STAMP, 'ns', 0)
 _RECEIVERS: list['Receiver'] = []
 
 
@@ -104,12 +119,14 @@ class Merge:
     arrives: DDS has then delivered everything up to it. Fast -> syncing when DDS brings a
     message the fast path did not deliver (it is delivered).
 
-    A *fast-only* message (the publisher did not write it to DDS: every subscriber of the topic
-    takes the fast path, :meth:`Sender.send`) carries ``marker``, the publisher's last message
-    written to DDS (None: none yet). In fast mode it is delivered at once. In syncing mode it
-    is delivered once DDS has brought the marker; until then it and the fast messages after it
-    are *held* (at most :data:`HOLD`: a marker DDS never brings -- a best-effort or keep-last
-    reader lost it -- does not stop the stream)."""
+    Every fast message carries ``marker``, the publisher's last message written to DDS before
+    it (None: none yet). A *fast-only* message (not written to DDS: every subscriber of the
+    topic takes the fast path, :meth:`Sender.send`) is delivered in syncing mode too. A fast
+    message whose marker this subscription has not seen on either path (the publisher wrote a
+    message to DDS alone: a send to this subscriber failed, or it was not a target yet) is
+    *held*, with those after it, until DDS brings the marker (at most :data:`HOLD` messages
+    or :data:`HOLD_S` s: a marker DDS never brings -- a best-effort or keep-last reader lost it
+    -- does not stop the stream)."""
 
     __slots__ = ('deliver', 'drain', 'fast_mode', 'pending', 'newest_fast', 'held', 'waiting', 'last_dds',
                  'fast', 'dds', 'duplicates', 'skipped', 'resyncs')
@@ -121,7 +138,7 @@ class Merge:
         self.fast_mode = False
         self.pending: deque[bytes] = deque(maxlen=KEEP)
         self.newest_fast: bytes | None = None
-        self.held: list[tuple[bytes, bool]] = []   # syncing: fast messages waiting for the marker
+        self.held: list[tuple[bytes, bool, int]] = []   # syncing: fast messages waiting for the marker
         self.waiting: bytes | None = None          # ... the marker
         self.last_dds: bytes | None = None         # the newest message DDS brought
         self.fast = 0          # delivered from the fast path
@@ -131,33 +148,42 @@ class Merge:
         self.resyncs = 0       # fast -> syncing
 
     def from_fast(self, data: bytes, deliver: bool = True, fast_only: bool = False,
-                  marker: bytes | None = None) -> None:
+                  marker: bytes | None = None, stamp: int = 0) -> None:
         """A message from the fast path; ``deliver=False``: taken but not delivered (an older
         message of a keep-last backlog; its DDS copy is dropped all the same); ``fast_only``:
-        not written to DDS, ``marker`` the publisher's last message that was."""
+        not written to DDS; ``marker``: the publisher's last message written to DDS before it
+        (None: none); ``stamp``: its arrival time (ns, :func:`delivery_stamp` while it is
+        delivered; 0 = unknown)."""
+        if self.held:
+            self.held.append((data, deliver, stamp))
+            if len(self.held) >= HOLD:           # the marker is not coming
+                self._flush()
+            return
+        seen = (marker is None or marker == self.last_dds
+                or (self.pending and (marker == self.pending[-1] or marker in self.pending)))
         if not self.fast_mode:
-            if self.held:
-                self.held.append((data, deliver))
-                if len(self.held) >= HOLD:       # the marker is not coming
-                    self._flush()
-                return
             if not fast_only:
-                self.newest_fast = data
+                self.newest_fast = data          # DDS delivers it
                 return
-            if marker is not None and marker != self.last_dds:
-                self.held.append((data, deliver))
-                self.waiting = marker
-                return
-            self.fast_mode = True            # DDS brought all the publisher wrote to it
+        if not seen:        # the publisher wrote a message to DDS alone that has not come yet
+            self.held.append((data, deliver, stamp))
+            self.waiting = marker
+            return
+        if not self.fast_mode:
+            self.fast_mode = True                # DDS brought all the publisher wrote to it
             self.pending.clear()
             self.newest_fast = None
-        self._take(data, deliver)
+        self._take(data, deliver, stamp)
 
-    def _take(self, data: bytes, deliver: bool) -> None:
+    def _take(self, data: bytes, deliver: bool, stamp: int = 0) -> None:
         self.pending.append(data)
         if deliver:
             self.fast += 1
-            self.deliver(data)
+            _STAMP.ns = stamp
+            try:
+                self.deliver(data)
+            finally:
+                _STAMP.ns = 0
         else:
             self.skipped += 1
 
@@ -175,8 +201,8 @@ class Merge:
         if self.waiting is not None:
             self.pending.append(self.waiting)
         self.waiting = self.newest_fast = None
-        for data, deliver in held:
-            self._take(data, deliver)
+        for data, deliver, stamp in held:
+            self._take(data, deliver, stamp)
 
     def from_dds(self, data: bytes) -> None:
         """A message from DDS. The fast path's datagrams waiting in the socket are taken first:
@@ -184,6 +210,11 @@ class Merge:
         if self.drain is not None:
             self.drain()
         self.last_dds = data
+        if self.held and data != self.waiting and any(h[0] == data for h in self.held):
+            self._flush()                # DDS brought a held one: the marker is lost
+            take_copy(self.pending, data)
+            self.duplicates += 1
+            return
         if self.fast_mode:
             if take_copy(self.pending, data):
                 self.duplicates += 1
@@ -192,11 +223,6 @@ class Merge:
             self.pending.clear()
             self.newest_fast = None
             self.resyncs += 1
-        elif self.held and any(h == data for h, _ in self.held):
-            self._flush()                # DDS brought a held one: the marker is behind it
-            take_copy(self.pending, data)
-            self.duplicates += 1
-            return
         self.dds += 1
         self.deliver(data)
         if self.held:
@@ -216,19 +242,29 @@ class Receiver:
     datagram to ``merge.from_fast`` holding :data:`CALLBACK_LOCK`. Of a backlog found when the
     lock is taken, only the newest ``depth`` are delivered. ``on_error(exc)`` gets an exception
     raised by the callback (the thread stops; DDS delivers from then on). OSError from ``bind``
-    (address in use: two nodes of one name) propagates: no fast path then."""
+    (address in use: two nodes of one name) propagates: no fast path then.
+
+    ``polled``: no thread; the owner calls :meth:`drain` (holding the lock) now and then, and
+    each message is delivered with the kernel's time of its arrival in the socket
+    (:func:`delivery_stamp`) -- for a reader that needs the arrival times but not a wake-up per
+    message (the recorder: PERFORMANCE.md, 15.). It must drain more often than
+    ``net.unix.max_dgram_qlen`` (10 on Debian) messages arrive; a send that finds the socket
+    full goes to DDS instead."""
 
     def __init__(self, addr: bytes, merge: Merge, depth: int,
                  on_error: Callable[[BaseException], None] | None = None,
-                 on_start: Callable[[int], None] | None = None) -> None:
+                 on_start: Callable[[int], None] | None = None, polled: bool = False) -> None:
         self.addr = addr
         self.merge = merge
         self.depth = max(1, int(depth))
         self.on_error = on_error
         self.on_start = on_start
+        self.polled = polled
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
         try:
             self.sock.bind(addr)
+            if polled:
+                self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         except OSError:
             self.sock.close()
             raise
@@ -237,8 +273,10 @@ class Receiver:
         self.closed = False
         self.malformed = 0       # datagrams that are not ours (ignored)
         merge.drain = self.drain
-        self.thread = threading.Thread(target=self._run, name='hostbus-rx', daemon=True)
-        self.thread.start()
+        self.thread = None
+        if not polled:
+            self.thread = threading.Thread(target=self._run, name='hostbus-rx', daemon=True)
+            self.thread.start()
 
     def _run(self) -> None:
         raise_priority()
@@ -260,23 +298,36 @@ class Receiver:
             if not self._locked(self.drain if events else merge.flush_held):
                 return
 
-    def drain(self) -> None:
+    def drain(self) -> int:
         """Hand every datagram waiting in the socket to the merge (the lock held); of more
-        than ``depth``, the older ones are taken without being delivered (keep-last)."""
+        than ``depth``, the older ones are taken without being delivered (keep-last). Returns
+        how many there were."""
         batch = []
-        while True:
-            try:
-                batch.append(self.sock.recv(MAX_DATAGRAM, socket.MSG_DONTWAIT))
-            except OSError:
-                break
+        sock = self.sock
+        try:
+            if self.polled:
+                while True:
+                    data, anc, _, _ = sock.recvmsg(MAX_DATAGRAM, _CMSG_SPACE, socket.MSG_DONTWAIT)
+                    stamp = 0
+                    for level, kind, value in anc:
+                        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(value) >= 16:
+                            sec, nsec = _TIMESPEC.unpack_from(value)
+                            stamp = sec * 1_000_000_000 + nsec
+                    batch.append((data, stamp))
+            else:
+                while True:
+                    batch.append((sock.recv(MAX_DATAGRAM, socket.MSG_DONTWAIT), 0))
+        except OSError:
+            pass
         n_old = len(batch) - self.depth
-        for i, datagram in enumerate(batch):
+        for i, (datagram, stamp) in enumerate(batch):
             message = unpack(datagram)
             if message is None:
                 self.malformed += 1
                 continue
             data, fast_only, marker = message
-            self.merge.from_fast(data, i >= n_old, fast_only, marker)
+            self.merge.from_fast(data, i >= n_old, fast_only, marker, stamp)
+        return len(batch)
 
     def _locked(self, fn, *args) -> bool:
         """``fn(*args)`` holding the lock; False when the thread must end (closed, or the
@@ -307,27 +358,26 @@ class Receiver:
 
 
 def pack(data: bytes, fast_only: bool = False, marker: bytes | None = None) -> bytes:
-    """The datagram of ``data``: a first byte 0 (the message is written to DDS too), 1 (fast
-    only, no marker: the publisher never wrote to DDS) or 2 (fast only, then the marker's length
-    in 4 bytes little-endian, the marker), then the message."""
-    if not fast_only:
-        return b'\0' + data
+    """The datagram of ``data``: a first byte, bit 0 = fast only (not written to DDS), bit 1 =
+    a marker follows (the publisher's last message written to DDS before this one: its length
+    in 4 bytes little-endian, then its bytes); then the message."""
+    kind = (1 if fast_only else 0) | (0 if marker is None else 2)
     if marker is None:
-        return b'\1' + data
-    return b'\2' + len(marker).to_bytes(4, 'little') + marker + data
+        return bytes((kind,)) + data
+    return bytes((kind,)) + len(marker).to_bytes(4, 'little') + marker + data
 
 
 def unpack(datagram: bytes) -> tuple[bytes, bool, bytes | None] | None:
     """(message, fast_only, marker) of a datagram of :func:`pack`; None if it is not one."""
-    kind = datagram[:1]
-    if kind == b'\0':
-        return datagram[1:], False, None
-    if kind == b'\1':
-        return datagram[1:], True, None
-    if kind == b'\2' and len(datagram) >= 5:
+    if not datagram or datagram[0] > 3:
+        return None
+    kind = datagram[0]
+    if not kind & 2:
+        return datagram[1:], bool(kind & 1), None
+    if len(datagram) >= 5:
         n = int.from_bytes(datagram[1:5], 'little')
         if 5 + n <= len(datagram):
-            return datagram[5 + n:], True, datagram[5:5 + n]
+            return datagram[5 + n:], bool(kind & 1), datagram[5:5 + n]
     return None
 
 
@@ -387,7 +437,7 @@ class Sender:
         if len(datagram) > MAX_DATAGRAM:
             self.too_big += 1
             return False
-        ok = True
+        ok = bool(self.targets)
         for addr in self.targets:
             try:
                 self.sock.sendto(datagram, socket.MSG_DONTWAIT, addr)

@@ -98,9 +98,12 @@ class SimNode(RwNode):
 
         # first to an estimator in another process of this host, then DDS (rwpend_ros.hostbus)
         self.pub_enc = LocalPublisher(self, EncoderCounts, 'encoders', QOS_CONTROL_PUB)
-        self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL_PUB)
+        # true_state and /clock go to the recorder (and any other reader): LocalPublisher, so a
+        # recorder on this host takes them through the fast path (no DDS write when it is the
+        # only reader)
+        self.pub_true = LocalPublisher(self, PlantState, 'sim/true_state', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
+        self.pub_clock = LocalPublisher(self, Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
         # also taken directly from a controller in this process (composed mode, rwpend_ros.intra),
         # after the command is written to DDS: an estimator of this process then has command k
