@@ -251,9 +251,10 @@ class LocalPublisher:
             # first: the other process starts while this one goes on
             if sender.send(data, fast_only, sender.marker) and fast_only:
                 return
-            sender.marker = data
-            sender.fresh = False
         BUS.publish(self.topic, data, self.pub.publish)
+        if sender is not None:      # the marker of what follows: the last DDS write, whatever
+            sender.marker = data    # the targets were
+            sender.fresh = False
 
     def __getattr__(self, name):
         if name == 'pub':           # not built (the publisher's creation failed)

@@ -129,7 +129,7 @@ class Merge:
     -- does not stop the stream)."""
 
     __slots__ = ('deliver', 'drain', 'fast_mode', 'pending', 'newest_fast', 'held', 'waiting', 'last_dds',
-                 'fast', 'dds', 'duplicates', 'skipped', 'resyncs')
+                 'accepted', 'fast', 'dds', 'duplicates', 'skipped', 'resyncs')
 
     def __init__(self, deliver: Callable[[bytes], None]) -> None:
         self.deliver = deliver
@@ -138,9 +138,11 @@ class Merge:
         self.fast_mode = False
         self.pending: deque[bytes] = deque(maxlen=KEEP)
         self.newest_fast: bytes | None = None
-        self.held: list[tuple[bytes, bool, int]] = []   # syncing: fast messages waiting for the marker
+        #: fast messages (data, deliver, stamp, marker) waiting for a marker
+        self.held: list[tuple[bytes, bool, int, bytes | None]] = []
         self.waiting: bytes | None = None          # ... the marker
         self.last_dds: bytes | None = None         # the newest message DDS brought
+        self.accepted: bytes | None = None         # the marker of the newest fast one delivered
         self.fast = 0          # delivered from the fast path
         self.dds = 0           # delivered from DDS
         self.duplicates = 0    # DDS copies dropped
@@ -155,25 +157,27 @@ class Merge:
         (None: none); ``stamp``: its arrival time (ns, :func:`delivery_stamp` while it is
         delivered; 0 = unknown)."""
         if self.held:
-            self.held.append((data, deliver, stamp))
+            self.held.append((data, deliver, stamp, marker))
             if len(self.held) >= HOLD:           # the marker is not coming
-                self._flush()
+                self._flush(force=True)
             return
-        seen = (marker is None or marker == self.last_dds
-                or (self.pending and (marker == self.pending[-1] or marker in self.pending)))
-        if not self.fast_mode:
-            if not fast_only:
-                self.newest_fast = data          # DDS delivers it
-                return
-        if not seen:        # the publisher wrote a message to DDS alone that has not come yet
-            self.held.append((data, deliver, stamp))
+        if not self.fast_mode and not fast_only:
+            self.newest_fast = data              # DDS delivers it
+            return
+        if not self._seen(marker):  # the publisher wrote a message to DDS alone that has not come yet
+            self.held.append((data, deliver, stamp, marker))
             self.waiting = marker
             return
         if not self.fast_mode:
             self.fast_mode = True                # DDS brought all the publisher wrote to it
-            self.pending.clear()
             self.newest_fast = None
+        self.accepted = marker
         self._take(data, deliver, stamp)
+
+    def _seen(self, marker: bytes | None) -> bool:
+        """Whether this subscription has the message ``marker`` (from either path)."""
+        return (marker is None or marker == self.accepted or marker == self.last_dds
+                or (bool(self.pending) and (marker == self.pending[-1] or marker in self.pending)))
 
     def _take(self, data: bytes, deliver: bool, stamp: int = 0) -> None:
         self.pending.append(data)
@@ -190,18 +194,22 @@ class Merge:
     def flush_held(self) -> None:
         """Deliver the held messages without their marker (it did not come in time)."""
         if self.held:
-            self._flush()
+            self._flush(force=True)
 
-    def _flush(self) -> None:
-        """Syncing -> fast, delivering the held messages (the marker's copy, should it still
-        come, is dropped like a duplicate)."""
+    def _flush(self, force: bool = False) -> None:
+        """Deliver the held messages up to the first whose marker has not come (``force``: all
+        of them); -> fast mode. A marker that comes after all is delivered then: late, never
+        lost."""
         held, self.held = self.held, []
         self.fast_mode = True
-        self.pending.clear()
-        if self.waiting is not None:
-            self.pending.append(self.waiting)
-        self.waiting = self.newest_fast = None
-        for data, deliver, stamp in held:
+        self.newest_fast = None
+        self.waiting = None
+        for i, (data, deliver, stamp, marker) in enumerate(held):
+            if not force and i and not self._seen(marker):
+                self.held = held[i:]         # another message went to DDS alone: wait for it
+                self.waiting = marker
+                return
+            self.accepted = marker
             self._take(data, deliver, stamp)
 
     def from_dds(self, data: bytes) -> None:
@@ -211,16 +219,15 @@ class Merge:
             self.drain()
         self.last_dds = data
         if self.held and data != self.waiting and any(h[0] == data for h in self.held):
-            self._flush()                # DDS brought a held one: the marker is lost
+            self._flush(force=True)      # DDS brought a held one: the marker is lost
             take_copy(self.pending, data)
             self.duplicates += 1
             return
+        if take_copy(self.pending, data):    # a copy of one delivered fast (in either mode)
+            self.duplicates += 1
+            return
         if self.fast_mode:
-            if take_copy(self.pending, data):
-                self.duplicates += 1
-                return
             self.fast_mode = False       # the fast path missed this one: DDS alone until they meet
-            self.pending.clear()
             self.newest_fast = None
             self.resyncs += 1
         self.dds += 1

@@ -60,9 +60,8 @@ def test_merge_goes_back_to_dds_for_a_message_the_fast_path_missed():
     m.from_fast(b'1'); m.from_dds(b'1'); m.from_fast(b'2')
     m.from_dds(b'3')                # 3 not sent fast (sender dropped us): delivered, resync
     assert got == [b'1', b'2', b'3'] and not m.fast_mode and m.resyncs == 1
-    m.from_dds(b'2')                # a late copy of 2 after the resync would be... not possible:
-    # DDS keeps order, 2's copy came before 3's. A message from another publisher: delivered
-    assert got[-1] == b'2'
+    m.from_dds(b'2')                # a copy of 2 after 3 (DDS keeps a publisher's order: another
+    assert got[-1] == b'3'          # publisher's identical bytes): a duplicate, dropped
     m.from_fast(b'4'); m.from_dds(b'4'); m.from_fast(b'5')
     assert got[-2:] == [b'4', b'5'] and m.fast_mode
 
@@ -311,8 +310,8 @@ def test_merge_held_messages_go_when_the_marker_is_lost():
     m = Merge(got.append)
     m.from_fast(b'6', fast_only=True, marker=b'5')
     m.flush_held()                      # the receiving thread's timeout
-    m.from_dds(b'5')                    # too late: dropped, not delivered after 6
-    assert got == [b'6'] and m.fast_mode
+    m.from_dds(b'5')                    # too late: delivered after 6 -- late, never lost
+    assert got == [b'6', b'5']
     got.clear()
     m = Merge(got.append)
     for i in range(hostbus.HOLD):       # a bounded hold
@@ -333,6 +332,24 @@ def test_merge_holds_what_follows_a_message_the_publisher_wrote_to_dds_alone():
     m.from_dds(b'6')                              # 6's copy: dropped
     m.from_fast(b'7', marker=b'6'); m.from_dds(b'7')
     assert got == [b'4', b'5', b'6', b'7'] and m.duplicates == 2
+
+
+def test_merge_a_marker_later_than_the_hold_is_delivered_and_nothing_doubles():
+    """The recorder's case (make bench, control layout, a burst after a 10 ms stall): 5 went to
+    DDS alone (its socket was full), DDS brings it later than HOLD fast messages after it. 5 is
+    delivered late -- it was lost when the flush took it for a duplicate -- and the DDS copies
+    of the fast ones are still dropped."""
+    got = []
+    m = Merge(got.append)
+    m.from_fast(b'4'); m.from_dds(b'4')
+    later = [b'x%d' % i for i in range(hostbus.HOLD)]
+    for i, x in enumerate(later):
+        m.from_fast(x, marker=b'5' if i == 0 else later[i - 1])
+    assert got == [b'4'] + later                  # the hold ran over: delivered
+    m.from_dds(b'5')
+    for x in later:
+        m.from_dds(x)
+    assert got == [b"4"] + later + [b"5"] and m.duplicates == len(later)
 
 
 def test_merge_double_fault_breaks_order_once_loses_nothing():
@@ -358,7 +375,7 @@ def test_merge_keep_last_skips_while_holding():
     assert got == [b'0', b'2'] and m.skipped == 1
 
 
-@pytest.mark.parametrize('seed', range(100))
+@pytest.mark.parametrize('seed', range(int(__import__('os').environ.get('HOSTBUS_SEEDS', '100'))))
 def test_merge_random_interleavings_with_fast_only_phases(seed):
     """The publisher as LocalPublisher: every datagram carries its marker (the last DDS write
     before it); it leaves DDS out (fast only) in some phases (no other subscriber), the first
@@ -366,7 +383,8 @@ def test_merge_random_interleavings_with_fast_only_phases(seed):
     then (that message goes to DDS alone) and the sender resumes at any time. The receiving
     thread takes datagrams at random instants; a DDS copy first drains the datagrams sent
     before it (Merge.drain); the hold timeout is modelled. Delivered: strictly increasing,
-    nothing lost that DDS carried or the fast path carried alone."""
+    nothing lost that DDS carried or the fast path carried alone; the order broken only right
+    after a message a keep-last DDS reader lost."""
     rng = random.Random(seed)
     n = 400
     hold_timeout = 6.0
@@ -377,6 +395,7 @@ def test_merge_random_interleavings_with_fast_only_phases(seed):
     only_phase = False
     marker = None
     must_arrive = set()
+    dds_lost = set()
     for i in range(n):
         t = i * 1.0
         if rng.random() < 0.03:
@@ -393,12 +412,12 @@ def test_merge_random_interleavings_with_fast_only_phases(seed):
             must_arrive.add(i)
             continue
         marker, fresh = str(i).encode(), False
-        # else dropped by a keep-last DDS reader -- but not one this subscriber got from DDS
-        # alone (the double fault of test_merge_double_fault_breaks_order_once_loses_nothing)
-        if stopped or rng.random() > 0.03:
+        if rng.random() > 0.03:
             t_dds = max(t_dds, t + rng.uniform(0.0, 4.0))
             events.append((t_dds, 1, i, False, None))
             must_arrive.add(i)
+        else:                                    # dropped by a keep-last DDS reader
+            dds_lost.add(i)
     events.sort(key=lambda e: e[:2])
     socket_queue = [e for e in events if e[1] == 0]     # datagrams, in the order sent
     got = []
@@ -421,8 +440,10 @@ def test_merge_random_interleavings_with_fast_only_phases(seed):
         if path:
             m.from_dds(str(i).encode())
     m.flush_held()
-    assert got == sorted(set(got)), 'once each, in order'
+    assert len(got) == len(set(got)), 'once each'
     assert must_arrive <= set(got), 'nothing lost'
+    for a, b in zip(got, got[1:]):    # order breaks only after a marker DDS lost (the double
+        assert b > a or any(b - 10 <= d <= a for d in dds_lost), (a, b)   # fault, above)
 
 
 def test_receiver_delivers_held_messages_when_the_marker_does_not_come(fast_pair):
