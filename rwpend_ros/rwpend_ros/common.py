@@ -281,7 +281,9 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
     merge = receiver = None
     if host and hostbus.enabled():
         # bound before the subscription shows in the graph: a publisher that sees it can send
-        merge = hostbus.Merge(deliver)
+        # a polled subscriber (the recorder) waits as long as it takes for a message that went
+        # to it through DDS alone (its socket was full: DDS lags then), rather than reorder
+        merge = hostbus.Merge(deliver, hold=hostbus.KEEP if polled else hostbus.HOLD)
         addr = hostbus.address(node.context.get_domain_id(), topic_name, node.get_fully_qualified_name())
         depth = qos.depth if qos.history == HistoryPolicy.KEEP_LAST else 1 << 30
         try:

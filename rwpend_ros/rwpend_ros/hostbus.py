@@ -124,15 +124,18 @@ class Merge:
     topic takes the fast path, :meth:`Sender.send`) is delivered in syncing mode too. A fast
     message whose marker this subscription has not seen on either path (the publisher wrote a
     message to DDS alone: a send to this subscriber failed, or it was not a target yet) is
-    *held*, with those after it, until DDS brings the marker (at most :data:`HOLD` messages
-    or :data:`HOLD_S` s: a marker DDS never brings -- a best-effort or keep-last reader lost it
-    -- does not stop the stream)."""
+    *held*, with those after it, until DDS brings the marker (at most ``hold`` messages, and
+    :data:`HOLD_S` s on a receiving thread: a marker DDS never brings -- a best-effort or
+    keep-last reader lost it -- does not stop the stream). A marker that comes after all is
+    delivered then, late: nothing is lost."""
 
-    __slots__ = ('deliver', 'drain', 'fast_mode', 'pending', 'newest_fast', 'held', 'waiting', 'last_dds',
+    __slots__ = ('deliver', 'hold', 'drain', 'fast_mode', 'pending', 'newest_fast', 'held', 'waiting', 'last_dds',
                  'accepted', 'fast', 'dds', 'duplicates', 'skipped', 'resyncs')
 
-    def __init__(self, deliver: Callable[[bytes], None]) -> None:
+    def __init__(self, deliver: Callable[[bytes], None], hold: int = 0) -> None:
         self.deliver = deliver
+        #: messages held at most (default :data:`HOLD`; a recorder, which can wait, holds more)
+        self.hold = hold or HOLD
         #: takes what the fast path has brought and not handed over yet (Receiver.drain)
         self.drain: Callable[[], None] | None = None
         self.fast_mode = False
@@ -158,7 +161,7 @@ class Merge:
         delivered; 0 = unknown)."""
         if self.held:
             self.held.append((data, deliver, stamp, marker))
-            if len(self.held) >= HOLD:           # the marker is not coming
+            if len(self.held) >= self.hold:      # the marker is not coming
                 self._flush(force=True)
             return
         if not self.fast_mode and not fast_only:
