@@ -5,16 +5,16 @@ only enqueue (topic, wire bytes, receive time); a writer thread does the MCAP wo
 appear later are picked up (graph polled every 0.5 s). Each subscription uses the publishers'
 reliability/durability and a keep-last 1000 history.
 
-The topics our nodes publish at the sample rate (:data:`FAST_TYPES`) are taken through the
-same-host fast path as well (:func:`rwpend_ros.common.local_subscription`): with the recorder
-on it too, every subscriber of those topics on this host takes it, and their publishers leave
-DDS out -- a recorded loop costs no DDS message per sample (PERFORMANCE.md, 15.). The
-recorder's fast receivers have no thread each: one thread drains them all every
-:data:`FAST_POLL_S` (a wake-up per 2 ms, not one per message), and a message's log time is
-the kernel's time of its arrival in the socket, so the bag's log times keep the order in which
-the messages reached the recorder across topics (offline re-estimation replays them in that
-order). Each message is recorded once, in order; one the recorder's socket cannot take goes
-to it through DDS.
+With ``RWPEND_RECORDER_FAST_PATH=1`` the topics our nodes publish at the sample rate
+(:data:`FAST_TYPES`) are taken through the same-host fast path as well
+(:func:`rwpend_ros.common.local_subscription`): then every subscriber of those topics on this
+host takes it, and their publishers write nothing to DDS per sample (PERFORMANCE.md, 15.: the
+loop's CPU down by ~40 % at 1 kHz). The recorder's fast receivers have no thread each: one
+thread drains them all every :data:`FAST_POLL_S`, and a message's log time is the kernel's time
+of its arrival in the socket. Off by default: a message that reaches the recorder through DDS
+instead (its socket was full: a starved recorder) is logged at its callback's time, which can be
+milliseconds late, so the cross-topic order of the log times breaks in such stretches and an
+offline replay can differ from the live run. Each message is still recorded once, in order.
 """
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ class Recorder(Node):
         self.skipped: dict[str, str] = {}
         self._closed = False
         self._received = [0]
-        self.fast = hostbus.enabled()
+        self.fast = hostbus.recorder_enabled()
         self._batch: list[tuple[int, str, bytes]] = []   # fast topics: (log time, topic, data)
         self._last_ns: dict[str, int] = {}
         self._fast_stop = threading.Event()
@@ -235,7 +235,7 @@ def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool) -> in
     from rwpend_ros.transport import apply_transport_or_exit
     apply_transport_or_exit()  # before rclpy.init
     try:
-        hostbus.enabled()
+        hostbus.recorder_enabled()
     except ValueError as exc:
         print(f'rwpend record: {exc}', file=sys.stderr)
         return 2

@@ -61,13 +61,20 @@ HOLD = 32
 HOLD_S = 0.05
 
 
-def enabled(env=None) -> bool:
-    """``RWPEND_HOST_BUS``: 1 (or unset) = on, 0 = off; ValueError for anything else."""
+def enabled(env=None, name: str = 'RWPEND_HOST_BUS', default: str = '1') -> bool:
+    """``RWPEND_HOST_BUS`` (or ``name``): 1 = on, 0 = off, unset or empty = ``default``;
+    ValueError for anything else."""
     env = os.environ if env is None else env
-    value = env.get('RWPEND_HOST_BUS', '1').strip() or '1'
+    value = env.get(name, default).strip() or default
     if value not in ('0', '1'):
-        raise ValueError(f"RWPEND_HOST_BUS={env['RWPEND_HOST_BUS']!r}: expected 0 (off) or 1 (on)")
+        raise ValueError(f"{name}={env[name]!r}: expected 0 (off) or 1 (on)")
     return value == '1'
+
+
+def recorder_enabled(env=None) -> bool:
+    """``RWPEND_RECORDER_FAST_PATH``: 1 = the recorder takes the fast path too, 0 or unset = it
+    reads DDS only (rwpend_bag.recorder_node, PERFORMANCE.md 15.)."""
+    return enabled(env, 'RWPEND_RECORDER_FAST_PATH', '0') and enabled(env)
 
 
 def address(domain_id: int, topic: str, node_fqn: str) -> bytes:

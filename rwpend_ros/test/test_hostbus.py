@@ -244,6 +244,14 @@ def test_raise_priority_is_harmless_without_real_time_scheduling():
     assert os.sched_getscheduler(0) == before
 
 
+def test_recorder_fast_path_is_opt_in():
+    assert not hostbus.recorder_enabled({})
+    assert hostbus.recorder_enabled({'RWPEND_RECORDER_FAST_PATH': '1'})
+    assert not hostbus.recorder_enabled({'RWPEND_RECORDER_FAST_PATH': '1', 'RWPEND_HOST_BUS': '0'})
+    with pytest.raises(ValueError, match='RWPEND_RECORDER_FAST_PATH'):
+        hostbus.recorder_enabled({'RWPEND_RECORDER_FAST_PATH': 'yes'})
+
+
 def test_enabled_by_environment():
     assert hostbus.enabled({}) and hostbus.enabled({'RWPEND_HOST_BUS': '1'})
     assert hostbus.enabled({'RWPEND_HOST_BUS': ''})
@@ -375,7 +383,7 @@ def test_merge_keep_last_skips_while_holding():
     assert got == [b'0', b'2'] and m.skipped == 1
 
 
-@pytest.mark.parametrize('seed', range(int(__import__('os').environ.get('HOSTBUS_SEEDS', '100'))))
+@pytest.mark.parametrize('seed', range(int(os.environ.get('HOSTBUS_SEEDS', '100'))))
 def test_merge_random_interleavings_with_fast_only_phases(seed):
     """The publisher as LocalPublisher: every datagram carries its marker (the last DDS write
     before it); it leaves DDS out (fast only) in some phases (no other subscriber), the first
