@@ -7,9 +7,11 @@ Why: a DDS hop between two processes of this host costs ~100-140 us p50 on the 2
 per sample; a datagram on a Unix socket read by a thread that runs the callback itself costs
 ~25 us (PERFORMANCE.md, 14.). So the publisher of a loop topic (encoders, state, command)
 first sends the message as one datagram to every subscriber of the topic on this host, then
-publishes it on DDS as before: the recorder and every other reader still get it through DDS,
-and DDS stays the path whenever the fast one is missing (another host, another network
-namespace, a full socket, a subscriber just started).
+publishes it on DDS -- unless every subscriber DDS matched is one the datagram just reached
+(*fast only*, PERFORMANCE.md 15.): any other reader (our recorder by default, a tool of a full
+ROS install, a node on another host) gets every message through DDS, and DDS stays the path
+whenever the fast one is missing (another host, another network namespace, a full socket, a
+subscriber just started).
 
 Addresses: an abstract Unix socket per subscription, named from (domain id, topic, subscriber
 node's fully qualified name) by :func:`address`; the publisher learns the subscribers' node names
@@ -22,9 +24,9 @@ Rules (what keeps it safe):
   callbacks still run one at a time;
 * every subscriber gets each message once and in the publisher's order: :class:`Merge`
   delivers a fast message only once the two paths have met (the DDS copy of the newest fast
-  message arrived), drops the DDS copies of messages delivered fast, and goes back to DDS alone
-  whenever DDS brings a message the fast path did not (a publisher that stopped sending fast,
-  another publisher);
+  message arrived) or its *marker* (the publisher's last DDS write before it) has come, drops
+  the DDS copies of messages delivered fast, and goes back to DDS alone whenever DDS brings a
+  message the fast path did not (a publisher that stopped sending fast, another publisher);
 * a send that fails (receiver gone, its socket full) drops that receiver until the publisher
   looks at the graph again: the receiver gets everything through DDS meanwhile;
 * the bytes sent are the bytes DDS delivers: a message is padded to a multiple of 4 bytes
@@ -55,7 +57,8 @@ KEEP = 1024
 #: largest message sent fast (the loop's messages are < 200 bytes); a bigger one goes by DDS
 #: alone (Sender.send), so a receiver never reads a cut datagram
 MAX_DATAGRAM = 65536
-#: fast-only messages a syncing :class:`Merge` holds at most while it waits for their marker
+#: fast messages a :class:`Merge` holds at most while it waits for their marker (a polled
+#: subscriber, the recorder, holds up to KEEP)
 HOLD = 32
 #: ... and seconds its receiving thread waits for the marker before it delivers them anyway
 HOLD_S = 0.05
