@@ -153,7 +153,13 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
 
 
 def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
-    """Node specs and params files from the ``up`` arguments; raises ValueError with the reason."""
+    """Node specs and params files from the ``up`` arguments; raises ValueError with the reason
+    (also for a bad ``RWPEND_TRANSPORT``, ``RWPEND_HOST_BUS`` or ``RWPEND_RECORDER_FAST_PATH``:
+    refused here, before any process starts)."""
+    from rwpend_ros import hostbus
+    from rwpend_ros.transport import transport_choice
+    transport_choice()
+    hostbus.recorder_enabled()      # checks RWPEND_HOST_BUS too
     params: dict[str, dict] = {'sim': {}, 'estimator': {}, 'controller': {}, 'driver': {}}
     rig: dict = {}
     for f in a.params:

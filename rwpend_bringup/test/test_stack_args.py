@@ -74,3 +74,11 @@ def test_cpu_latency_must_be_an_integer(capsys):
     with pytest.raises(SystemExit) as e:
         p.parse_args(['--cpu-latency', 'fast'])
     assert e.value.code == 2 and '--cpu-latency' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('name, bad', [('RWPEND_TRANSPORT', 'tcp'), ('RWPEND_HOST_BUS', 'off'),
+                                       ('RWPEND_RECORDER_FAST_PATH', 'yes')])
+def test_bad_environment_switch_refused_before_anything_starts(monkeypatch, name, bad):
+    monkeypatch.setenv(name, bad)
+    with pytest.raises(ValueError, match=name):
+        specs_of('--record', '/tmp/x')

@@ -76,8 +76,10 @@ def enabled(env=None, name: str = 'RWPEND_HOST_BUS', default: str = '1') -> bool
 
 def recorder_enabled(env=None) -> bool:
     """``RWPEND_RECORDER_FAST_PATH``: 1 = the recorder takes the fast path too, 0 or unset = it
-    reads DDS only (rwpend_bag.recorder_node, PERFORMANCE.md 15.)."""
-    return enabled(env, 'RWPEND_RECORDER_FAST_PATH', '0') and enabled(env)
+    reads DDS only (rwpend_bag.recorder_node, PERFORMANCE.md 15.). Checks both variables: a
+    bad value of either is a ValueError."""
+    host = enabled(env)
+    return enabled(env, 'RWPEND_RECORDER_FAST_PATH', '0') and host
 
 
 def address(domain_id: int, topic: str, node_fqn: str) -> bytes:
@@ -196,6 +198,9 @@ class Merge:
         self.pending.append(data)
         if deliver:
             self.fast += 1
+            if not stamp:            # a receiving thread's message: no arrival time to hand on
+                self.deliver(data)
+                return
             _STAMP.ns = stamp
             try:
                 self.deliver(data)
