@@ -50,6 +50,9 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
         for key in ('simulated_s', 'wall_s', 'sim_per_wall', 'cpu_s_per_simulated_s'):
             assert r.get(key) is not None, (key, r)
         assert r['simulated_s'] == pytest.approx(1.0, abs=1e-6)
+    # lockstep keeps pace with its recorder (the simulator's lockstep_recorder_window): nothing lost
+    dropped = res['lockstep'][1]['dropped']
+    assert dropped and all(v == 0 for v in dropped.values()), dropped
 
     d = res['decode']
     assert d['messages'] > 0 and d['msgs_per_s'] > 0

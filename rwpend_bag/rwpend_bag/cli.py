@@ -50,6 +50,10 @@ def _record(argv) -> int:
     p.add_argument('-o', '--output', help='bag directory to create (default: rwpend_<date>)')
     p.add_argument('-a', '--all', action='store_true', help='record every topic (also later ones)')
     p.add_argument('--namespace', default='/', help='namespace for relative topic names')
+    p.add_argument('--progress', metavar='TOPIC',
+                   help='publish on TOPIC (rosgraph_msgs/Clock) every 10th /clock recorded: a lockstep '
+                        'simulator with lockstep_recorder_window waits for it (./rwpend up --lockstep '
+                        '--record sets it)')
     p.add_argument('topics', nargs='*', help='topics to record')
     a = p.parse_args(argv)
     if a.all and a.topics:
@@ -62,8 +66,17 @@ def _record(argv) -> int:
     if not out.parent.exists():
         return _usage_error(p.prog, f'{out.parent} does not exist')
     topics = [_abs_topic(t, a.namespace) for t in a.topics]
+    progress = None
+    if a.progress is not None:
+        from rclpy.exceptions import InvalidTopicNameException
+        from rclpy.validate_full_topic_name import validate_full_topic_name
+        progress = _abs_topic(a.progress, a.namespace)
+        try:
+            validate_full_topic_name(progress)
+        except InvalidTopicNameException as exc:
+            return _usage_error(p.prog, f'--progress: invalid topic name {a.progress!r} ({exc})')
     from .recorder_node import run_recorder
-    return run_recorder(str(out), topics, a.all)
+    return run_recorder(str(out), topics, a.all, progress)
 
 
 # ------------------------------------------------------------------ info

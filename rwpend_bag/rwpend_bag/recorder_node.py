@@ -15,6 +15,12 @@ of its arrival in the socket. Off by default: a message that reaches the recorde
 instead (its socket was full: a starved recorder) is logged at its callback's time, which can be
 milliseconds late, so the cross-topic order of the log times breaks in such stretches and an
 offline replay can differ from the live run. Each message is still recorded once, in order.
+
+``progress`` (``rwpend record --progress TOPIC``, set by ``./rwpend up --lockstep --record``): every
+:data:`rwpend_ros.common.RECORDER_PROGRESS_EVERY` ``/clock`` messages taken (handed to the bag
+writer, whose queue loses nothing), that ``/clock`` is published on TOPIC; a lockstep simulator
+keeps within its ``lockstep_recorder_window`` of it, so a recorder that falls behind slows the
+run down instead of losing messages.
 """
 from __future__ import annotations
 
@@ -26,16 +32,19 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from rwpend_ros import hostbus
-from rwpend_ros.common import local_subscription
+from rwpend_ros.common import QOS_PROGRESS, RECORDER_PROGRESS_EVERY, local_subscription
 from rwpend_ros.hostbus import CALLBACK_LOCK
 
 from . import msgdefs
 from .writer import INFINITE_TIME, ThreadedBagWriter
 
 DEPTH = 1000
-#: period (s) of the thread that drains the fast path's sockets; a socket holds 10 datagrams
-#: (net.unix.max_dgram_qlen): 2 ms is 2-4 samples per topic at 1-2 kHz
+#: period (s) of the thread that drains the fast path's connections (each holds what its
+#: publisher's send buffer does, hundreds of messages: rwpend_ros.hostbus.SEND_BUFFER); 2 ms is
+#: 2-4 samples per topic at 1-2 kHz
 FAST_POLL_S = 0.002
+#: ... an eighth of it while a drain finds more than this many messages on one topic
+FAST_BACKLOG = 64
 #: types our nodes publish at the sample rate with rwpend_ros.common.LocalPublisher (the
 #: same-host fast path): the loop's, the simulator's truth and clock, the estimator's joint states
 FAST_TYPES = frozenset({'rwpend_msgs/msg/EncoderCounts', 'rwpend_msgs/msg/StateEstimate',
@@ -65,8 +74,17 @@ def qos_dict(q) -> dict:
 
 
 class Recorder(Node):
-    def __init__(self, out_dir: str, topics: list[str] | None, record_all: bool):
+    def __init__(self, out_dir: str, topics: list[str] | None, record_all: bool,
+                 progress: str | None = None):
         super().__init__('recorder')
+        #: publisher of the progress (the newest /clock taken), None without --progress
+        self.progress_pub = None
+        self.progress_topic = None
+        if progress:
+            from rosgraph_msgs.msg import Clock
+            self.progress_pub = self.create_publisher(Clock, progress, QOS_PROGRESS)
+            self.progress_topic = self.progress_pub.topic_name
+        self._clocks = 0
         self.writer = ThreadedBagWriter(out_dir)
         self.wanted = set(topics or [])
         self.record_all = record_all
@@ -86,8 +104,8 @@ class Recorder(Node):
 
     def discover(self) -> None:
         for name, types in self.get_topic_names_and_types():
-            if name in self.subs or name in self.skipped:
-                continue
+            if name in self.subs or name in self.skipped or name == self.progress_topic:
+                continue     # (its own progress: not part of the run)
             if not self.record_all and name not in self.wanted:
                 continue
             type_name = types[0]
@@ -120,18 +138,31 @@ class Recorder(Node):
                     self._fast_thread.start()
             else:
                 self.subs[name] = self.create_subscription(
-                    cls, name, self._receiver(name), qos, raw=True)
+                    cls, name, self._receiver(name, progress=name == '/clock'), qos, raw=True)
             self.get_logger().info(f'recording {name} [{type_name}] '
                                    f'{"reliable" if reliable else "best effort"}')
 
-    def _receiver(self, name: str):
+    def _receiver(self, name: str, progress: bool = False):
         put = self.writer.put
         counter = self._received
 
         def receive(data, _n=name, _put=put, _now=time.time_ns, _count=counter):
             _put(_n, data, _now())
             _count[0] += 1
+
+        if progress and self.progress_pub is not None:
+            def receive_clock(data, _receive=receive, _taken=self._clock_taken):
+                _receive(data)
+                _taken(data)
+            return receive_clock
         return receive
+
+    def _clock_taken(self, data: bytes) -> None:
+        """A /clock message is in the writer's queue: every RECORDER_PROGRESS_EVERY of them,
+        published as the progress (the same bytes: rosgraph_msgs/Clock)."""
+        self._clocks += 1
+        if self._clocks % RECORDER_PROGRESS_EVERY == 0:
+            self.progress_pub.publish(bytes(data))
 
     def _fast_receiver(self, name: str):
         """Callback of a fast topic (either path; CALLBACK_LOCK held): into the batch, with the
@@ -158,18 +189,21 @@ class Recorder(Node):
         if batch:
             batch.sort(key=lambda item: item[0])
             put = self.writer.put
+            progress = self.progress_pub is not None
             for t, name, data in batch:
                 put(name, data, t)
+                if progress and name == '/clock':
+                    self._clock_taken(data)
             self._received[0] += len(batch)
         return most
 
     def _fast_loop(self) -> None:
-        """Every FAST_POLL_S; sooner while a socket comes back more than a third full (a
-        lockstep run at several times real time)."""
+        """Every FAST_POLL_S; sooner while a drain finds a backlog (a recorder that fell
+        behind)."""
         wait = FAST_POLL_S
         while not self._fast_stop.wait(wait):
             try:
-                wait = FAST_POLL_S if self.poll_fast() <= 3 else FAST_POLL_S / 8
+                wait = FAST_POLL_S if self.poll_fast() <= FAST_BACKLOG else FAST_POLL_S / 8
             except Exception as exc:  # noqa: BLE001 - reported; DDS still delivers
                 self.get_logger().error(f'fast path: {exc!r}')
                 return
@@ -205,7 +239,11 @@ class Recorder(Node):
                 self.destroy_subscription(sub)
             except Exception:  # noqa: BLE001 - context may be gone already
                 pass
-        report = self.writer.close({'skipped_topics': self.skipped})
+        extra = {'skipped_topics': self.skipped}
+        merges = getattr(self, 'hostbus_merges', {})
+        if merges:       # how each fast topic reached the bag (PERFORMANCE.md 15.)
+            extra['fast_path'] = {t: m.counters() for t, m in merges.items()}
+        report = self.writer.close(extra)
         print_report(report)
         return report
 
@@ -214,6 +252,9 @@ def print_report(report: dict, file=sys.stdout) -> None:
     print(f"bag {report['bag']}: {report['message_count']} messages", file=file)
     for name, d in report['topics'].items():
         print(f'  {name}: {d["text"]}', file=file)
+    for name, c in report.get('fast_path', {}).items():
+        print(f"  {name}: same-host fast path {c['fast']}, DDS {c['dds']} "
+              f"(returns to DDS {c['resyncs']})", file=file)
     for name, why in report.get('skipped_topics', {}).items():
         print(f'  {name}: NOT RECORDED ({why})', file=file)
     if report.get('writer_error'):
@@ -221,7 +262,8 @@ def print_report(report: dict, file=sys.stdout) -> None:
     file.flush()
 
 
-def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool) -> int:
+def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool,
+                 progress: str | None = None) -> int:
     """The ``record`` process: record until SIGINT/SIGTERM, then drain (:meth:`Recorder.drain`)
     and close the bag. rclpy's own signal handlers are off, so the context stays usable while
     draining. Priority from the environment (``rwpend_ros.common.apply_scheduling``)."""
@@ -254,7 +296,7 @@ def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool) -> in
     old = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
     try:
-        node = Recorder(out_dir, topics, record_all)
+        node = Recorder(out_dir, topics, record_all, progress)
         executor = make_executor()
         executor.add_node(node)
         freeze_gc()

@@ -512,7 +512,19 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
         tm = trace_metrics(trace_dir)
         res['step_us'] = tm.get('step_us')
         res['stages_us'] = tm.get('stages_us')
+    if record:
+        res['dropped'] = lockstep_dropped(bag, ns)
     return res
+
+
+def lockstep_dropped(bag: Path, ns: str) -> dict:
+    """Seq gaps the recorder saw on the loop's topics (recording_report.json; None: no report
+    or topic): a lockstep run keeps pace with its recorder, so any gap is a fault."""
+    rf = Path(bag) / 'recording_report.json'
+    report = json.loads(rf.read_text()).get('topics', {}) if rf.is_file() else {}
+    nsp = ns.rstrip('/')
+    return {name: (report[name].get('missing') if name in report else None)
+            for name in (f'{nsp}/encoders', f'{nsp}/sim/true_state', f'{nsp}/state', f'{nsp}/command')}
 
 
 def run_decode(bag: Path) -> dict:
@@ -575,8 +587,11 @@ def summary_text(res: dict) -> str:
     if res['lockstep']:
         lines.append('lockstep (simulated s per wall s; CPU s per simulated s, all processes):')
         for r in res['lockstep']:
-            lines.append(f"  {r['layout']:<9} h={r['h_s'] * 1e3:g} ms  recorder "
-                         f"{'yes' if r['recorder'] else 'no ':<3}  {_fmt(r['simulated_s'], 1)} s in "
+            drops = [v for v in (r.get('dropped') or {}).values() if v is not None]
+            rec = ('no ' if not r['recorder'] else
+                   f"yes (dropped {sum(drops) if drops else 'n/a'})")
+            lines.append(f"  {r['layout']:<9} h={r['h_s'] * 1e3:g} ms  recorder {rec:<3}  "
+                         f"{_fmt(r['simulated_s'], 1)} s in "
                          f"{_fmt(r['wall_s'], 2)} s = {_fmt(r['sim_per_wall'], 2)}x real time, CPU "
                          f"{_fmt(r.get('cpu_s_per_simulated_s'), 2)} s/s; load {r.get('loadavg_before')}; "
                          f"host steal {_fmt(r.get('host_steal_pct'), 1)} %")

@@ -41,6 +41,8 @@ NODE_MODULES = {
 }
 #: ``--composed`` values: which nodes share one process (rwpend_bringup.composed)
 COMPOSITIONS = ('all', 'control')
+#: ./rwpend up --lockstep --record: samples the simulator may run ahead of the recorder
+LOCKSTEP_RECORDER_WINDOW = 50
 
 
 class Parser(argparse.ArgumentParser):
@@ -133,7 +135,7 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--no-controller', action='store_true', help='do not start the controller')
     p.add_argument('--rt-priority', type=int, default=0, metavar='N',
                    help='SCHED_FIFO priority N (1-99) for the loop processes (plant, estimator, '
-                   'controller), N-10 for the recorder; falls back to nice -10 where real-time '
+                   'controller), N-10 for the recorder (N in lockstep); falls back to nice -10 where real-time '
                    'scheduling is not permitted (default 0: ordinary scheduling); see PERFORMANCE.md')
     p.add_argument('--cpu-latency', type=int, default=None, metavar='US',
                    help='while the stack runs, ask the kernel (PM QoS, /dev/cpu_dma_latency) to keep '
@@ -233,8 +235,13 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
             raise ValueError(f'{out} already exists (choose a new bag directory)')
         if not out.parent.exists():
             raise ValueError(f'{out.parent} does not exist')
-        specs.append(NodeSpec('recorder', 'rwpend_bag.cli', args=['record', '-o', str(out), '--all'],
-                              ros_args=False, stop_rank=9))
+        rec_args = ['record', '-o', str(out), '--all']
+        if plant == 'sim' and a.lockstep:
+            # the simulator keeps within 50 samples of the recorder: a recorder that falls
+            # behind slows the run down rather than losing messages (rwpend_sim.sim_node)
+            plant_spec.params.setdefault('lockstep_recorder_window', LOCKSTEP_RECORDER_WINDOW)
+            rec_args += ['--progress', a.ns.rstrip('/') + '/recorder/progress']
+        specs.append(NodeSpec('recorder', 'rwpend_bag.cli', args=rec_args, ros_args=False, stop_rank=9))
     composed = getattr(a, 'composed', None)
     if composed is True:      # a caller's boolean (the flag before it took a value)
         composed = 'all'
@@ -259,7 +266,11 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         raise ValueError(f'--rt-priority must be in 0..99, got {prio}')
     if prio:
         for s in specs:
-            s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - 10) if s.name == 'recorder' else prio)
+            # real time: the recorder below the loop (it can wait, the loop cannot); lockstep:
+            # the loop keeps both CPUs busy and waits for the recorder (its window), so the
+            # recorder runs at the loop's priority
+            below = s.name == 'recorder' and not a.lockstep
+            s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - 10) if below else prio)
     lat = getattr(a, 'cpu_latency', None)
     if lat is not None and lat < 0:
         raise ValueError(f'--cpu-latency must be >= 0 (µs), got {lat}')

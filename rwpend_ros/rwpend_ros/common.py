@@ -53,6 +53,16 @@ QOS_CONTROL_LATEST = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=
 #: Status and diagnostics.
 QOS_STATUS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                         depth=100, durability=DurabilityPolicy.VOLATILE)
+#: The recorder's progress in lockstep (``--progress``: the newest /clock it took, every
+#: RECORDER_PROGRESS_EVERY of them) and the simulator's subscription to it.
+QOS_PROGRESS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                          depth=10, durability=DurabilityPolicy.VOLATILE)
+RECORDER_PROGRESS_EVERY = 10
+#: bounds of the simulator's lockstep_recorder_window (samples): above twice the recorder's
+#: reporting step (else the run could wait for a report that only comes later), below the
+#: publishers' depth (QOS_CONTROL_PUB, 100) less that step (a reader that lags more loses samples)
+RECORDER_WINDOW_MIN = 2 * RECORDER_PROGRESS_EVERY
+RECORDER_WINDOW_MAX = 80
 #: Latched state (e-stop): a late joiner gets the last value.
 QOS_LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -201,8 +211,12 @@ class LocalPublisher:
         self.pub = node.create_publisher(msg_type, topic, qos)
         self.topic = self.pub.topic_name
         self.sender: hostbus.Sender | None = None
+        self.dds_writes = 0     # messages written to DDS (the others went by the fast path only)
         if host and hostbus.enabled():
             self.sender = hostbus.Sender()
+            if not hasattr(node, 'hostbus_publishers'):
+                node.hostbus_publishers = {}
+            node.hostbus_publishers[self.topic] = self
             self._node = node
             self._domain = node.context.get_domain_id()
             self._count = -1
@@ -223,7 +237,9 @@ class LocalPublisher:
             infos = [i for i in infos if qos_matches(qos, i.qos_profile)]
         except Exception:  # noqa: BLE001 - node or context going away: keep the targets
             return
-        self._count = count
+        # the graph may not show every subscriber DDS has matched yet: then look again at the
+        # next tick (not HOST_RETRY_PERIOD later), or the one missing gets DDS alone meanwhile
+        self._count = count if len(infos) >= count else -1
         self._ticks = 0
         self.sender.set_targets(
             hostbus.address(self._domain, self.topic, hostbus.node_fqn(info.node_namespace, info.node_name))
@@ -252,6 +268,7 @@ class LocalPublisher:
             if sender.send(data, fast_only, sender.marker) and fast_only:
                 return
         BUS.publish(self.topic, data, self.pub.publish)
+        self.dds_writes += 1
         if sender is not None:      # the marker of what follows: the last DDS write, whatever
             sender.marker = data    # the targets were
             sender.fresh = False
@@ -317,11 +334,18 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
 
 
 def fast_path_values(node) -> dict[str, str]:
-    """Diagnostics key-values of ``node``'s same-host fast path, one per subscription:
-    messages delivered fast / through DDS, DDS copies dropped, returns to DDS (resyncs)."""
-    return {f'fast_path {topic}': (f"fast {c['fast']}, dds {c['dds']}, duplicates {c['duplicates']}, "
-                                   f"skipped {c['skipped']}, resyncs {c['resyncs']}")
-            for topic, c in ((t, m.counters()) for t, m in getattr(node, 'hostbus_merges', {}).items())}
+    """Diagnostics key-values of ``node``'s same-host fast path: one per subscription
+    (messages delivered fast / through DDS, DDS copies dropped, returns to DDS: resyncs) and one
+    per publisher (datagrams sent, sends that failed -- a receiver's socket full --, messages
+    also written to DDS)."""
+    values = {f'fast_path {topic}': (f"fast {c['fast']}, dds {c['dds']}, duplicates {c['duplicates']}, "
+                                     f"skipped {c['skipped']}, resyncs {c['resyncs']}")
+              for topic, c in ((t, m.counters()) for t, m in getattr(node, 'hostbus_merges', {}).items())}
+    for topic, pub in getattr(node, 'hostbus_publishers', {}).items():
+        sender = pub.sender
+        values[f'fast_path_out {topic}'] = (f'sent {sender.sent}, failed {sender.failed}, '
+                                            f'dds writes {pub.dds_writes}')
+    return values
 
 
 #: an exception raised by a callback on a fast-path receiving thread (re-raised by spin_executor)

@@ -15,7 +15,12 @@ subscriber just started).
 
 Addresses: an abstract Unix socket per subscription, named from (domain id, topic, subscriber
 node's fully qualified name) by :func:`address`; the publisher learns the subscribers' node names
-from the ROS graph. Nothing is created in the file system, nothing outlives its process.
+from the ROS graph. Nothing is created in the file system, nothing outlives its process. A
+subscriber woken per message (a node of the loop) binds a datagram socket; a *polled* one (the
+recorder, which drains now and then) listens on a SOCK_SEQPACKET socket and each publisher
+connects to it: a datagram socket holds 10 messages (``net.unix.max_dgram_qlen``), a connection
+as many as the publisher's send buffer (:data:`SEND_BUFFER`: ~250 loop messages with Debian's
+default ``net.core.wmem_max``, thousands where it is higher).
 
 Rules (what keeps it safe):
 
@@ -57,6 +62,9 @@ KEEP = 1024
 #: largest message sent fast (the loop's messages are < 200 bytes); a bigger one goes by DDS
 #: alone (Sender.send), so a receiver never reads a cut datagram
 MAX_DATAGRAM = 65536
+#: send buffer (bytes) asked for a connection to a polled receiver (the kernel caps it at
+#: ``net.core.wmem_max``): how much a recorder that runs behind can have waiting
+SEND_BUFFER = 1 << 20
 #: fast messages a :class:`Merge` holds at most while it waits for their marker (a polled
 #: subscriber, the recorder, holds up to KEEP)
 HOLD = 32
@@ -272,9 +280,10 @@ class Receiver:
     ``polled``: no thread; the owner calls :meth:`drain` (holding the lock) now and then, and
     each message is delivered with the kernel's time of its arrival in the socket
     (:func:`delivery_stamp`) -- for a reader that needs the arrival times but not a wake-up per
-    message (the recorder: PERFORMANCE.md, 15.). It must drain more often than
-    ``net.unix.max_dgram_qlen`` (10 on Debian) messages arrive; a send that finds the socket
-    full goes to DDS instead."""
+    message (the recorder: PERFORMANCE.md, 15.). It listens on a SOCK_SEQPACKET socket, each
+    publisher connects (:class:`Sender`): what waits for the drain is bounded by the
+    publisher's send buffer (:data:`SEND_BUFFER`), not by ``net.unix.max_dgram_qlen`` (10 on
+    Debian) as on a datagram socket; a send that finds it full goes to DDS instead."""
 
     def __init__(self, addr: bytes, merge: Merge, depth: int,
                  on_error: Callable[[BaseException], None] | None = None,
@@ -285,11 +294,14 @@ class Receiver:
         self.on_error = on_error
         self.on_start = on_start
         self.polled = polled
-        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        #: polled: the publishers' connections, in the order they came
+        self.conns: list[socket.socket] = []
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET if polled else socket.SOCK_DGRAM)
         try:
             self.sock.bind(addr)
             if polled:
-                self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+                self.sock.listen(64)
+                self.sock.setblocking(False)
         except OSError:
             self.sock.close()
             raise
@@ -329,21 +341,14 @@ class Receiver:
         how many there were."""
         batch = []
         sock = self.sock
-        try:
-            if self.polled:
-                while True:
-                    data, anc, _, _ = sock.recvmsg(MAX_DATAGRAM, _CMSG_SPACE, socket.MSG_DONTWAIT)
-                    stamp = 0
-                    for level, kind, value in anc:
-                        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(value) >= 16:
-                            sec, nsec = _TIMESPEC.unpack_from(value)
-                            stamp = sec * 1_000_000_000 + nsec
-                    batch.append((data, stamp))
-            else:
+        if self.polled:
+            self._drain_connections(batch)
+        else:
+            try:
                 while True:
                     batch.append((sock.recv(MAX_DATAGRAM, socket.MSG_DONTWAIT), 0))
-        except OSError:
-            pass
+            except OSError:
+                pass
         n_old = len(batch) - self.depth
         for i, (datagram, stamp) in enumerate(batch):
             message = unpack(datagram)
@@ -353,6 +358,39 @@ class Receiver:
             data, fast_only, marker = message
             self.merge.from_fast(data, i >= n_old, fast_only, marker, stamp)
         return len(batch)
+
+    def _drain_connections(self, batch: list) -> None:
+        """Polled: accept the new connections, then take what each holds, with its arrival
+        time (a message sent before its connection was accepted has none: 0)."""
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:          # none waiting (or closed)
+                break
+            conn.setblocking(False)
+            try:
+                conn.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+            except OSError:
+                pass
+            self.conns.append(conn)
+        for conn in list(self.conns):
+            while True:
+                try:
+                    data, anc, _, _ = conn.recvmsg(MAX_DATAGRAM, _CMSG_SPACE)
+                except BlockingIOError:
+                    break
+                except OSError:      # reset by the publisher
+                    data = b''
+                if not data:         # the publisher closed it (a message is never empty)
+                    self.conns.remove(conn)
+                    conn.close()
+                    break
+                stamp = 0
+                for level, kind, value in anc:
+                    if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(value) >= 16:
+                        sec, nsec = _TIMESPEC.unpack_from(value)
+                        stamp = sec * 1_000_000_000 + nsec
+                batch.append((data, stamp))
 
     def _locked(self, fn, *args) -> bool:
         """``fn(*args)`` holding the lock; False when the thread must end (closed, or the
@@ -378,6 +416,9 @@ class Receiver:
         except OSError:
             pass
         self.sock.close()
+        for conn in self.conns:
+            conn.close()
+        self.conns = []
         if self in _RECEIVERS:
             _RECEIVERS.remove(self)
 
@@ -430,13 +471,17 @@ def close_all() -> None:
 
 class Sender:
     """The fast path's start in a publisher: ``send`` writes the message to every target (one
-    non-blocking datagram each). A target with no receiver bound (not on this host, not started
-    yet, gone) is *absent*; one whose send failed otherwise (its socket full) is *dropped*;
-    both get DDS alone until ``set_targets`` gives them again. Thread-safe for one sending
-    thread next to the thread calling ``set_targets``."""
+    non-blocking datagram each; to a polled receiver, on a connection ``set_targets`` opened).
+    A target with no receiver bound (not on this host, not started yet, gone) is *absent*; one
+    whose send failed otherwise (its socket full) is *dropped*; both get DDS alone until
+    ``set_targets`` gives them again. Thread-safe for one sending thread next to the thread
+    calling ``set_targets``."""
 
     def __init__(self) -> None:
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        #: connections to polled receivers (SOCK_SEQPACKET), by address; replaced as a whole
+        #: by set_targets, a broken one only closed by send
+        self.conns: dict[bytes, socket.socket] = {}
         self.targets: tuple[bytes, ...] = ()
         self.sent = 0
         self.failed = 0          # sends that failed for another reason than an absent receiver
@@ -449,6 +494,11 @@ class Sender:
 
     def set_targets(self, addrs: Iterable[bytes]) -> None:
         targets = tuple(a for a in dict.fromkeys(addrs) if a not in _LOCAL)
+        conns = {}
+        for addr in targets:     # a polled receiver listens: connect (once) to it
+            conn = self.conns.get(addr)
+            conns[addr] = conn if conn is not None and conn.fileno() != -1 else _connect(addr)
+        self.conns = {a: c for a, c in conns.items() if c is not None}
         if targets != self.targets:
             self.fresh = True
         self.targets = targets
@@ -463,14 +513,22 @@ class Sender:
             self.too_big += 1
             return False
         ok = bool(self.targets)
+        conns = self.conns
         for addr in self.targets:
+            conn = conns.get(addr)
             try:
-                self.sock.sendto(datagram, socket.MSG_DONTWAIT, addr)
+                if conn is None:
+                    self.sock.sendto(datagram, socket.MSG_DONTWAIT, addr)
+                else:
+                    conn.send(datagram, socket.MSG_DONTWAIT | socket.MSG_NOSIGNAL)
                 self.sent += 1
             except OSError as exc:   # no such receiver (any more), its socket full
                 ok = False
                 self.targets = tuple(a for a in self.targets if a != addr)
-                if exc.errno not in (errno.ECONNREFUSED, errno.ENOENT):
+                if exc.errno in _GONE:
+                    if conn is not None:
+                        conn.close()     # set_targets connects again if it comes back
+                else:
                     self.failed += 1
                     self.dropped = True
         return ok
@@ -478,3 +536,28 @@ class Sender:
     def close(self) -> None:
         self.targets = ()
         self.sock.close()
+        for conn in self.conns.values():
+            conn.close()
+        self.conns = {}
+
+
+#: errors of a send to a receiver that is not there (any more); EAGAIN (full) is not one
+_GONE = frozenset({errno.ECONNREFUSED, errno.ENOENT, errno.ECONNRESET, errno.EPIPE, errno.ENOTCONN,
+                   errno.EBADF})
+
+
+def _connect(addr: bytes) -> socket.socket | None:
+    """A connection to the polled receiver at ``addr`` (SOCK_SEQPACKET, non-blocking, with
+    :data:`SEND_BUFFER`); None when none listens there (absent, or a datagram receiver)."""
+    conn = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    try:
+        conn.setblocking(False)
+        conn.connect(addr)
+    except OSError:
+        conn.close()
+        return None
+    try:
+        conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER)
+    except OSError:
+        pass
+    return conn

@@ -112,6 +112,16 @@ def pack_clock(sec: int, nanosec: int) -> bytes:
     return ENCAPSULATION + _CLOCK.pack(sec, nanosec)
 
 
+def unpack_clock_ns(data: bytes) -> int:
+    """rosgraph_msgs/Clock (wire bytes, either byte order) -> its time in ns; struct.error when
+    too short, ValueError for a negative time."""
+    fmt = '<iI' if data[1:2] != b'\x00' else '>iI'
+    sec, nanosec = struct.unpack_from(fmt, data, 4)
+    if sec < 0:
+        raise ValueError(f'negative clock: {sec} s')
+    return sec * 1_000_000_000 + nanosec
+
+
 def pack_encoders(header: bytes, seq: int, pendulum_counts: int, motor_counts: int) -> bytes:
     return (ENCAPSULATION + header + bytes(_pad8(len(header)))
             + _ENC_TAIL.pack(seq, pendulum_counts, motor_counts))

@@ -472,3 +472,69 @@ def test_sender_reports_whether_every_target_got_it(fast_pair):
     assert wait_for(lambda: got == [b'1', b'2'])
     s.set_targets([r.addr])
     assert s.fresh is True or s.targets == (r.addr,)
+
+
+def polled_pair(tag):
+    """(delivered [(data, delivery_stamp)], merge in fast mode, polled receiver, sender connected
+    to it as set_targets connects to a receiver of another process)."""
+    got = []
+    m = Merge(lambda d: got.append((d, hostbus.delivery_stamp())), hold=KEEP)
+    m.fast_mode = True
+    addr = unique_addr(tag)
+    r = Receiver(addr, m, depth=1 << 30, polled=True)
+    s = Sender()
+    hostbus._LOCAL.discard(addr)       # as if it were bound by another process
+    try:
+        s.set_targets([addr])
+    finally:
+        hostbus._LOCAL.add(addr)
+    assert s.targets == (addr,) and addr in s.conns, 'a polled receiver is reached by a connection'
+    return got, m, r, s
+
+
+def test_a_polled_receiver_holds_hundreds_with_their_arrival_times():
+    """A datagram socket holds 10 messages (net.unix.max_dgram_qlen); a polled receiver's
+    connection holds what the publisher's send buffer does: a recorder may drain seldom."""
+    got, m, r, s = polled_pair('polled')
+    try:
+        with CALLBACK_LOCK:
+            assert r.drain() == 0                # accepts the connection
+        t0 = time.time_ns()
+        for i in range(500):
+            assert s.send(b'%04d' % i)
+        t1 = time.time_ns()
+        with CALLBACK_LOCK:
+            assert r.drain() == 500
+        assert [d for d, _ in got] == [b'%04d' % i for i in range(500)]
+        stamps = [t for _, t in got]
+        assert stamps == sorted(stamps) and t0 <= stamps[0] and stamps[-1] <= t1
+        assert s.failed == 0 and hostbus.delivery_stamp() == 0
+    finally:
+        r.close()
+        s.close()
+
+
+def test_a_full_polled_receiver_is_dropped_and_a_gone_one_is_absent():
+    got, m, r, s = polled_pair('polled_full')
+    try:
+        n = 0
+        while s.send(bytes(1000)):
+            n += 1
+            assert n < 1_000_000
+        assert n > 10 and s.failed == 1 and s.dropped and s.targets == ()
+        with CALLBACK_LOCK:
+            assert r.drain() == n                # nothing lost before the full one
+    finally:
+        r.close()
+    s2 = polled_pair('polled_gone')
+    _, _, r2, s2 = s2
+    r2.close()
+    assert not s2.send(b'x')                     # the receiver went away: absent, not a failure
+    assert s2.failed == 0 and not s2.dropped and s2.targets == ()
+    hostbus._LOCAL.discard(r2.addr)
+    s2.set_targets([r2.addr])                    # nobody listens there now: no connection
+    assert r2.addr not in s2.conns
+    s2.send(b'y')
+    assert s2.targets == () and s2.failed == 0
+    s2.close()
+    s.close()

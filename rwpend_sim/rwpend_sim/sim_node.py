@@ -10,6 +10,11 @@ Two time modes (parameter ``lockstep``):
 * lockstep: publishes ``/clock``; for sample k it waits for the command answering seq k
   (``lockstep_timeout`` s of wall time, then u = 0 for that sample, counted) before
   integrating; runs as fast as the loop allows; identical inputs give identical outputs.
+  With ``lockstep_recorder_window`` W > 0 it also keeps within W samples of the recorder: sample
+  k goes out once the recorder has reported (``recorder/progress``, rosgraph_msgs/Clock, every
+  :data:`rwpend_ros.common.RECORDER_PROGRESS_EVERY` samples) the ``/clock`` of sample k - W, so a
+  recorder that runs behind (starved of CPU, a slow disk) slows the run down instead of losing
+  messages (the publishers keep 100 samples for a reader that lags: QOS_CONTROL_PUB).
 
 All algorithms live in :mod:`rwpend_sim.sim_core` and :mod:`rwpend_model.plant`.
 """
@@ -29,7 +34,8 @@ from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState
 from rwpend_msgs.srv import Disturb
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, LocalPublisher,
+from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS,
+                               RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN, ConfigError, LocalPublisher,
                                RwNode, declare_rig, diagnostic_status, fast_path_values,
                                local_subscription, run_node)
 from rwpend_sim.sim_core import SimCore
@@ -37,6 +43,12 @@ from rwpend_sim.sim_core import SimCore
 PARAMS = {
     'lockstep': (False, 'lockstep time mode: publish /clock, wait for the command of each sample'),
     'lockstep_timeout': (0.5, 'lockstep: wall seconds to wait for the command of a sample'),
+    'lockstep_recorder_window': (0, 'lockstep: samples the simulator may run ahead of the recorder '
+                                 '(recorder/progress); 0 = no recorder to wait for (./rwpend up '
+                                 '--lockstep --record sets 50); else 20..80'),
+    'lockstep_recorder_timeout': (5.0, 'lockstep: wall seconds without progress from a recorder that is '
+                                  'behind before the simulator runs on without it (warned, counted in '
+                                  '/diagnostics: the bag may then miss messages)'),
     'start.delay': (0.5, 'wall seconds to wait after the loop is connected, before sample 0'),
     'start.encoders_subscribers': (1, 'subscribers of encoders to wait for before sample 0 (2 with a recorder)'),
     'start.true_state_subscribers': (0, 'subscribers of sim/true_state to wait for before sample 0'),
@@ -75,6 +87,12 @@ class SimNode(RwNode):
                 or p['start.first_command_timeout'] <= 0):
             raise ConfigError('lockstep_timeout, start.first_command_timeout and diagnostics_period '
                               'must be > 0, duration >= 0')
+        window = p['lockstep_recorder_window']
+        if not (window == 0 or RECORDER_WINDOW_MIN <= window <= RECORDER_WINDOW_MAX):
+            raise ConfigError(f'lockstep_recorder_window must be 0 or in {RECORDER_WINDOW_MIN}..'
+                              f'{RECORDER_WINDOW_MAX} (samples), got {window}')
+        if not p['lockstep_recorder_timeout'] > 0:
+            raise ConfigError(f"lockstep_recorder_timeout must be > 0 (s), got {p['lockstep_recorder_timeout']}")
         if not 0 <= p['wake_early_us'] <= 1_000_000:
             raise ConfigError(f"wake_early_us must be in 0..1000000 (us), got {p['wake_early_us']}")
         try:
@@ -113,6 +131,19 @@ class SimNode(RwNode):
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
         self.create_timer(p['diagnostics_period'], self.publish_diagnostics)
+        #: lockstep: samples this simulator may run ahead of the recorder (0: it does not wait)
+        self.recorder_window = int(window) if self.lockstep else 0
+        self.recorder_k = -1            # the newest sample the recorder reported (its /clock)
+        self.recorder_wall = 0.0        # wall time (monotonic) of its newest report
+        self.held_for_recorder = False  # sample core.k waits for the recorder
+        self.hold_wall = 0.0            # ... since
+        self.recorder_holds = 0         # samples that waited for the recorder
+        self.recorder_hold_s = 0.0      # wall seconds they waited
+        self.recorder_given_up = False  # the recorder stopped reporting: the run went on without it
+        self.malformed_progress = 0
+        if self.recorder_window:
+            self.create_subscription(Clock, 'recorder/progress', self.on_recorder_progress,
+                                     QOS_PROGRESS, raw=True)
 
         self.frame_id = p['frame_id']
         self.wall_start = time.monotonic()
@@ -150,6 +181,31 @@ class SimNode(RwNode):
             ok, _ = self.core.command(seq, u)
             if ok and self.awaiting is not None and self.core.u_seq >= self.awaiting:
                 self._step()
+
+    def on_recorder_progress(self, data: bytes) -> None:
+        """The recorder's progress (the newest ``/clock`` it took, wire bytes): a sample held
+        for it goes out once it is within ``lockstep_recorder_window`` samples."""
+        try:
+            k = wire.unpack_clock_ns(data) // int(round(self.h * 1e9))
+        except (struct.error, IndexError, ValueError):
+            with self.lock:
+                self.malformed_progress += 1
+            return
+        with self.lock:
+            self.recorder_wall = time.monotonic()
+            if k > self.recorder_k:
+                self.recorder_k = k
+            if self.held_for_recorder and not self._recorder_behind():
+                self._release_hold()
+                self._publish_lockstep()
+
+    def _recorder_behind(self) -> bool:
+        """Lock held: sample core.k must wait for the recorder."""
+        return bool(self.recorder_window) and self.core.k - self.recorder_window > self.recorder_k
+
+    def _release_hold(self) -> None:
+        self.held_for_recorder = False
+        self.recorder_hold_s += time.monotonic() - self.hold_wall
 
     def set_estop(self, on: bool) -> str:
         with self.lock:
@@ -224,7 +280,9 @@ class SimNode(RwNode):
                     and (not need_command or (
                         self.count_publishers(self.resolve_topic_name('command')) > 0
                         and self.count_subscribers(self.resolve_topic_name('state'))
-                        >= self.p['start.state_subscribers']))):
+                        >= self.p['start.state_subscribers']
+                        # the recorder this run keeps pace with takes /clock (its progress)
+                        and (not self.recorder_window or self.pub_clock.get_subscription_count() > 0)))):
                 break
             time.sleep(0.02)
         time.sleep(self.p['start.delay'])
@@ -279,6 +337,10 @@ class SimNode(RwNode):
         if self.lockstep:
             if self.done() or self.stop.is_set():
                 self.lock.notify_all()             # the loop thread finishes
+            elif self._recorder_behind():          # on_recorder_progress publishes it
+                self.held_for_recorder = True
+                self.hold_wall = time.monotonic()
+                self.recorder_holds += 1
             else:
                 self._publish_lockstep()
 
@@ -293,12 +355,29 @@ class SimNode(RwNode):
         """Publishes sample 0, then watches: each command answering the awaited sample steps
         the plant and publishes the next (:meth:`on_command`); a sample whose command does not
         come within ``lockstep_timeout`` wall seconds (``start.first_command_timeout`` for
-        sample 0) is integrated with u = 0 and counted late."""
+        sample 0) is integrated with u = 0 and counted late. A sample held for the recorder
+        (``lockstep_recorder_window``) waits for its progress; after
+        ``lockstep_recorder_timeout`` s without any, the run goes on without waiting for it."""
         self.wait_for_loop(need_command=True)
         timeout = self.p['lockstep_timeout']
         with self.lock:
             self._publish_lockstep()
             while not self.stop.is_set() and not self.done():
+                if self.held_for_recorder:
+                    limit = self.p['lockstep_recorder_timeout']
+                    remaining = max(self.recorder_wall, self.hold_wall) + limit - time.monotonic()
+                    if remaining > 0:
+                        self.lock.wait(min(remaining, timeout))
+                        continue
+                    self.get_logger().error(
+                        f'lockstep: the recorder reported no progress for {limit:g} s while '
+                        f'{self.core.k - self.recorder_k} samples behind; running on without waiting '
+                        'for it (the bag may miss messages)')
+                    self.recorder_window = 0
+                    self.recorder_given_up = True
+                    self._release_hold()
+                    self._publish_lockstep()
+                    continue
                 limit = timeout if self.core.k else self.p['start.first_command_timeout']
                 remaining = self.step_wall + limit - time.monotonic()
                 if remaining > 0:
@@ -339,6 +418,9 @@ class SimNode(RwNode):
                                                  f'{self.core.timeout_samples} samples, u = 0')
         elif c.rejected_commands:
             level, msg = DiagnosticStatus.WARN, f'rejected commands: {c.last_reject_reason}'
+        elif self.recorder_given_up:
+            level, msg = DiagnosticStatus.WARN, ('lockstep ran on without the recorder (no progress '
+                                                 'from it): the bag may miss messages')
         else:
             level, msg = DiagnosticStatus.OK, 'running'
         wall = time.monotonic() - self.wall_start
@@ -351,6 +433,10 @@ class SimNode(RwNode):
             'late_commands': c.late_commands, 'estop_samples': c.estop_samples,
             'overruns': self.overruns, 'malformed_commands': self.malformed_commands,
             'estop': self.core.estop, 'finished': self.finished,
+            **({'recorder_window': self.recorder_window, 'recorder_holds': self.recorder_holds,
+                'recorder_hold_s': f'{self.recorder_hold_s:.3f}', 'recorder_given_up': self.recorder_given_up,
+                'malformed_progress': self.malformed_progress}
+               if self.p['lockstep_recorder_window'] and self.lockstep else {}),
             **fast_path_values(self),
         }
         arr = DiagnosticArray()
