@@ -5,16 +5,18 @@ only enqueue (topic, wire bytes, receive time); a writer thread does the MCAP wo
 appear later are picked up (graph polled every 0.5 s). Each subscription uses the publishers'
 reliability/durability and a keep-last 1000 history.
 
-With ``RWPEND_RECORDER_FAST_PATH=1`` the topics our nodes publish at the sample rate
-(:data:`FAST_TYPES`) are taken through the same-host fast path as well
-(:func:`rwpend_ros.common.local_subscription`): then every subscriber of those topics on this
+The topics our nodes publish at the sample rate (:data:`FAST_TYPES`) are taken through the
+same-host fast path as well (:func:`rwpend_ros.common.local_subscription`;
+``RWPEND_RECORDER_FAST_PATH=0`` turns it off): then every subscriber of those topics on this
 host takes it, and their publishers write nothing to DDS per sample (PERFORMANCE.md, 15.: the
-loop's CPU down by ~40 % at 1 kHz). The recorder's fast receivers have no thread each: one
-thread drains them all every :data:`FAST_POLL_S`, and a message's log time is the kernel's time
-of its arrival in the socket. Off by default: a message that reaches the recorder through DDS
-instead (its socket was full: a starved recorder) is logged at its callback's time, which can be
-milliseconds late, so the cross-topic order of the log times breaks in such stretches and an
-offline replay can differ from the live run. Each message is still recorded once, in order.
+loop's CPU down by ~40 % at 1 kHz; 16.: lockstep with the recorder 0.5-0.9x -> 2.8-3.3x). The
+recorder's fast receivers have no thread each: one thread drains them all every
+:data:`FAST_POLL_S`, and a message's log time is the kernel's time of its arrival in the socket.
+Each publisher's connection holds hundreds of messages (rwpend_ros.hostbus.SEND_BUFFER); a
+message that reaches the recorder through DDS instead (a recorder starved for longer than
+that, a publisher on another host) is logged at its callback's time, which can be milliseconds
+late: the cross-topic order of the log times can break in such stretches. Each message is
+still recorded once, in order.
 
 ``progress`` (``rwpend record --progress TOPIC``, set by ``./rwpend up --lockstep --record``): every
 :data:`rwpend_ros.common.RECORDER_PROGRESS_EVERY` ``/clock`` messages taken (handed to the bag
@@ -93,6 +95,13 @@ class Recorder(Node):
         self._closed = False
         self._received = [0]
         self.fast = hostbus.recorder_enabled()
+        #: log time of a DDS message = when DDS received it (rclpy's message info, as rosbag2),
+        #: not when its callback ran: a fast message's is its arrival in the socket, and the two
+        #: must compare across topics. Needs the SingleThreadedExecutor (rclpy 7.1.6's
+        #: EventsExecutor fails on such callbacks; run_recorder picks it), so only with the fast
+        #: path, which leaves the recorder few DDS messages; without it every message comes by
+        #: DDS and the callback's time orders them all alike
+        self.dds_info = self.fast
         self._batch: list[tuple[int, str, bytes]] = []   # fast topics: (log time, topic, data)
         self._last_ns: dict[str, int] = {}
         self._fast_stop = threading.Event()
@@ -131,7 +140,7 @@ class Recorder(Node):
             if type_name in FAST_TYPES and self.fast:
                 self._last_ns[name] = 0
                 self.subs[name] = local_subscription(self, cls, name, self._fast_receiver(name), qos,
-                                                     intra=False, polled=True)
+                                                     intra=False, polled=True, dds_info=self.dds_info)
                 if self._fast_thread is None:
                     self._fast_thread = threading.Thread(target=self._fast_loop, name='recorder-fast',
                                                          daemon=True)
@@ -150,6 +159,17 @@ class Recorder(Node):
             _put(_n, data, _now())
             _count[0] += 1
 
+        if self.dds_info:
+            def receive(data, info, _n=name, _put=put, _now=time.time_ns, _count=counter):  # noqa: F811
+                _put(_n, data, info.get('received_timestamp') or _now())
+                _count[0] += 1
+
+            if progress and self.progress_pub is not None:
+                def receive_clock_info(data, info, _receive=receive, _taken=self._clock_taken):
+                    _receive(data, info)
+                    _taken(data)
+                return receive_clock_info
+            return receive
         if progress and self.progress_pub is not None:
             def receive_clock(data, _receive=receive, _taken=self._clock_taken):
                 _receive(data)
@@ -166,7 +186,8 @@ class Recorder(Node):
 
     def _fast_receiver(self, name: str):
         """Callback of a fast topic (either path; CALLBACK_LOCK held): into the batch, with the
-        arrival time in the socket (DDS: now), kept increasing per topic."""
+        arrival time in the socket or DDS's reception time (now if neither is known), kept
+        increasing per topic."""
         last = self._last_ns
 
         def receive(data, _n=name):
@@ -297,7 +318,11 @@ def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool,
     node = None
     try:
         node = Recorder(out_dir, topics, record_all, progress)
-        executor = make_executor()
+        if node.dds_info:      # the message info (DDS's reception times): see Recorder
+            from rclpy.executors import SingleThreadedExecutor
+            executor = SingleThreadedExecutor()
+        else:
+            executor = make_executor()
         executor.add_node(node)
         freeze_gc()
         while not stop.is_set() and rclpy.ok():

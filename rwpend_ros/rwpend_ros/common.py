@@ -281,7 +281,7 @@ class LocalPublisher:
 
 def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], None], qos,
                        before_dds: bool = True, intra: bool = True, host: bool = True,
-                       polled: bool = False):
+                       polled: bool = False, dds_info: bool = False):
     """A raw subscription (``callback`` takes wire bytes, holding
     :data:`rwpend_ros.hostbus.CALLBACK_LOCK`) that also takes the messages of a
     :class:`LocalPublisher` directly: from another node of this process (``intra``,
@@ -289,7 +289,10 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
     from another process of this host (``host``, :mod:`rwpend_ros.hostbus`, received by a
     thread of its own). Each message is delivered once, in the publisher's order (the DDS copies
     of those are dropped). ``polled``: the fast path's receiver has no thread of its own
-    (:class:`rwpend_ros.hostbus.Receiver`, the recorder). Returns the rclpy subscription; the
+    (:class:`rwpend_ros.hostbus.Receiver`, the recorder). ``dds_info``: a message from DDS is
+    delivered with the time DDS received it as :func:`rwpend_ros.hostbus.delivery_stamp` (the
+    rclpy message info: not with rclpy 7.1.6's EventsExecutor, which fails on such callbacks --
+    the recorder runs a SingleThreadedExecutor then). Returns the rclpy subscription; the
     fast path's :class:`rwpend_ros.hostbus.Merge` is in ``node.hostbus_merges[topic]``, its
     receiver in ``node.hostbus_receivers[topic]``."""
     topic_name = node.resolve_topic_name(topic)
@@ -316,8 +319,17 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
     def from_dds(data):
         with CALLBACK_LOCK:
             take(data)
+
+    def from_dds_info(data, info):
+        with CALLBACK_LOCK:
+            before = hostbus.set_stamp(info.get('received_timestamp') or 0)
+            try:
+                take(data)
+            finally:
+                hostbus.set_stamp(before)
     try:
-        sub = Node.create_subscription(node, msg_type, topic, from_dds, qos, raw=True)
+        sub = Node.create_subscription(node, msg_type, topic, from_dds_info if dds_info else from_dds,
+                                       qos, raw=True)
     except BaseException:
         if receiver is not None:
             receiver.close()

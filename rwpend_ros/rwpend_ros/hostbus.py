@@ -83,11 +83,11 @@ def enabled(env=None, name: str = 'RWPEND_HOST_BUS', default: str = '1') -> bool
 
 
 def recorder_enabled(env=None) -> bool:
-    """``RWPEND_RECORDER_FAST_PATH``: 1 = the recorder takes the fast path too, 0 or unset = it
-    reads DDS only (rwpend_bag.recorder_node, PERFORMANCE.md 15.). Checks both variables: a
-    bad value of either is a ValueError."""
+    """``RWPEND_RECORDER_FAST_PATH``: 1 or unset = the recorder takes the fast path too (with
+    ``RWPEND_HOST_BUS``), 0 = it reads DDS only (rwpend_bag.recorder_node, PERFORMANCE.md 15.
+    and 16.). Checks both variables: a bad value of either is a ValueError."""
     host = enabled(env)
-    return enabled(env, 'RWPEND_RECORDER_FAST_PATH', '0') and host
+    return enabled(env, 'RWPEND_RECORDER_FAST_PATH', '1') and host
 
 
 def address(domain_id: int, topic: str, node_fqn: str) -> bytes:
@@ -124,9 +124,17 @@ _STAMP.ns = 0
 
 def delivery_stamp() -> int:
     """While a polled receiver's message is delivered (in the callback, on that thread): the
-    time it arrived in the socket (ns since the epoch, CLOCK_REALTIME); 0 otherwise (DDS, a
-    thread receiver)."""
+    time it arrived in the socket (ns since the epoch, CLOCK_REALTIME); while a DDS message of a
+    subscription with ``dds_info`` is (:func:`rwpend_ros.common.local_subscription`): the time
+    DDS received it; 0 otherwise (a thread receiver)."""
     return getattr(_STAMP, 'ns', 0)
+
+
+def set_stamp(ns: int) -> int:
+    """Set what :func:`delivery_stamp` returns on this thread; returns the previous value."""
+    before = getattr(_STAMP, 'ns', 0)
+    _STAMP.ns = ns
+    return before
 _RECEIVERS: list['Receiver'] = []
 
 
@@ -209,11 +217,11 @@ class Merge:
             if not stamp:            # a receiving thread's message: no arrival time to hand on
                 self.deliver(data)
                 return
-            _STAMP.ns = stamp
+            before, _STAMP.ns = getattr(_STAMP, 'ns', 0), stamp
             try:
                 self.deliver(data)
             finally:
-                _STAMP.ns = 0
+                _STAMP.ns = before     # a DDS message being delivered keeps its own (set_stamp)
         else:
             self.skipped += 1
 

@@ -244,9 +244,10 @@ def test_raise_priority_is_harmless_without_real_time_scheduling():
     assert os.sched_getscheduler(0) == before
 
 
-def test_recorder_fast_path_is_opt_in():
-    assert not hostbus.recorder_enabled({})
-    assert hostbus.recorder_enabled({'RWPEND_RECORDER_FAST_PATH': '1'})
+def test_recorder_fast_path_is_on_unless_turned_off():
+    assert hostbus.recorder_enabled({}) and hostbus.recorder_enabled({'RWPEND_RECORDER_FAST_PATH': '1'})
+    assert not hostbus.recorder_enabled({'RWPEND_RECORDER_FAST_PATH': '0'})
+    assert not hostbus.recorder_enabled({'RWPEND_HOST_BUS': '0'})
     assert not hostbus.recorder_enabled({'RWPEND_RECORDER_FAST_PATH': '1', 'RWPEND_HOST_BUS': '0'})
     with pytest.raises(ValueError, match='RWPEND_RECORDER_FAST_PATH'):
         hostbus.recorder_enabled({'RWPEND_RECORDER_FAST_PATH': 'yes'})
@@ -538,3 +539,43 @@ def test_a_full_polled_receiver_is_dropped_and_a_gone_one_is_absent():
     assert s2.targets == () and s2.failed == 0
     s2.close()
     s.close()
+
+
+def test_a_polled_receiver_drains_on_any_thread():
+    """The recorder drains on a thread of its own (the arrival time is thread-local)."""
+    got, m, r, s = polled_pair('polled_thread')
+    errors = []
+
+    def drain():
+        try:
+            with CALLBACK_LOCK:
+                r.drain()
+        except BaseException as exc:  # noqa: BLE001
+            errors.append(exc)
+    try:
+        t = threading.Thread(target=drain)
+        t.start()
+        t.join()
+        s.send(b'a')
+        t = threading.Thread(target=drain)
+        t.start()
+        t.join()
+        assert not errors and [d for d, _ in got] == [b'a'] and got[0][1] > 0
+    finally:
+        r.close()
+        s.close()
+
+
+def test_a_dds_message_keeps_its_reception_time_after_the_drain_before_it():
+    """from_dds drains the fast messages first (each with its arrival time); the DDS message is
+    then delivered with the time set for it (local_subscription's dds_info), not with 0."""
+    got = []
+    m = Merge(lambda d: got.append((d, hostbus.delivery_stamp())), hold=KEEP)
+    m.fast_mode = True
+    m.drain = lambda: m.from_fast(b'fast', stamp=111)
+    before = hostbus.set_stamp(222)
+    try:
+        m.from_dds(b'dds')
+    finally:
+        hostbus.set_stamp(before)
+    assert got == [(b'fast', 111), (b'dds', 222)]
