@@ -744,7 +744,9 @@ def test_estop_holds_the_plant_at_zero_until_cleared(tmp_path, ros_env):
     j = k_on + int(np.nonzero(truth['u_commanded'][k_on:] == 0.0)[0][0])
     m = {'estop_to_zero_samples': int(j - k_on), 'estop_to_zero_ms_wall': round((int(log_ns[j]) - on[0]) / 1e6, 2)}
     assert m['estop_to_zero_samples'] <= 2, m
-    held = (log_ns > on[0] + 20_000_000) & (log_ns < off[0])
+    # 20 ms off either end: log times of two paths into the recorder (the samples' socket, the
+    # diagnostics' DDS reception) agree to a fraction of a ms, not to a sample in lockstep
+    held = (log_ns > on[0] + 20_000_000) & (log_ns < off[0] - 20_000_000)
     assert held.sum() > 200
     assert np.all(truth['u_commanded'][held] == 0.0)
     jj = np.nonzero(held)[0]

@@ -211,13 +211,16 @@ class SimNode(RwNode):
         with self.lock:
             changed = self.core.estop != on
             self.core.estop = on
+            if changed:
+                # reported before any sample taken with the new state goes out (the lock holds
+                # the loop): in a bag the report comes first
+                self.publish_diagnostics()
         if changed:
             # one call site per severity: rclpy refuses a severity change at a call site
             if on:
                 self.get_logger().warn('E-STOP raised: motor held at zero')
             else:
                 self.get_logger().info('e-stop cleared')
-            self.publish_diagnostics()
         return 'e-stop raised: motor at zero until cleared' if on else 'e-stop cleared'
 
     def on_estop_topic(self, msg: Bool) -> None:
