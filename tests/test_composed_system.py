@@ -61,6 +61,13 @@ def test_composed_lockstep_swings_up(tmp_path, ros_env):
     x = wrapped(truth['theta'])
     assert np.abs(x).min() < 0.05, f'never near upright: min |theta - pi| = {np.abs(x).min():.3f}'
     assert np.all(np.abs(cmd['u']) <= 10.0) and np.all(np.isfinite(cmd['u']))
+    # state's readers are the controller of the process (the bus) and the recorder (the
+    # same-host fast path): it is not written to DDS per sample
+    from test_safety_system import diagnostics
+    last = [values['fast_path_out /rwpend/state'] for _, _, _, _, values in diagnostics(bag)
+            if 'fast_path_out /rwpend/state' in values][-1]
+    counts = dict(kv.rsplit(' ', 1) for kv in last.split(', '))
+    assert int(counts['dds writes']) <= 5 and int(counts['sent']) > 1000, counts
 
 
 @pytest.mark.timeout(90)

@@ -248,10 +248,12 @@ class LocalPublisher:
     def publish(self, msg) -> None:
         """Fast path first (:meth:`rwpend_ros.hostbus.Sender.send`), then this process's
         subscribers and DDS. The DDS write is left out (*fast only*) when every subscription
-        DDS matched is a target the message just reached: none in this process, as many
-        matched as targets, and the targets unchanged since the last DDS write (so a new
-        subscriber gets one message through DDS first, the marker its merge syncs on). A
-        recorder or any other reader on the topic keeps every message on DDS."""
+        DDS matched is one the message reaches directly: a fast-path target it just reached or
+        a subscriber of this process the bus delivers it to now (as many matched as those), and
+        the targets unchanged since the last DDS write (so a new subscriber gets one message
+        through DDS first, the marker its merge syncs on). Any other reader on the topic (one
+        of this process the bus does not serve from this thread, a recorder reading DDS, a
+        node on another host) keeps every message on DDS."""
         sender = self.sender
         if not isinstance(msg, (bytes, bytearray)):
             if not (sender is not None and sender.targets) and not BUS.local(self.topic):
@@ -261,11 +263,13 @@ class LocalPublisher:
             msg = serialize_message(msg)
         data = hostbus.pad4(bytes(msg))    # the bytes DDS delivers across processes
         if sender is not None and sender.targets:
-            n = len(sender.targets)
-            fast_only = (not sender.fresh and self.topic not in BUS.topics
-                         and self.pub.get_subscription_count() == n)
+            local = BUS.local(self.topic)
+            fast_only = (not sender.fresh
+                         and self.pub.get_subscription_count() == len(sender.targets) + len(local))
             # first: the other process starts while this one goes on
             if sender.send(data, fast_only, sender.marker) and fast_only:
+                if local:
+                    BUS.publish(self.topic, data, _no_dds_write)
                 return
         BUS.publish(self.topic, data, self.pub.publish)
         self.dds_writes += 1
@@ -277,6 +281,10 @@ class LocalPublisher:
         if name == 'pub':           # not built (the publisher's creation failed)
             raise AttributeError(name)
         return getattr(self.pub, name)
+
+
+def _no_dds_write(data: bytes) -> None:
+    """LocalPublisher.publish, fast only: the bus delivers, DDS is left out."""
 
 
 def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], None], qos,
@@ -303,7 +311,8 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
         # bound before the subscription shows in the graph: a publisher that sees it can send
         # a polled subscriber (the recorder) waits as long as it takes for a message that went
         # to it through DDS alone (its socket was full: DDS lags then), rather than reorder
-        merge = hostbus.Merge(deliver, hold=hostbus.KEEP if polled else hostbus.HOLD)
+        merge = (hostbus.Merge(deliver, hold=hostbus.KEEP, keep=hostbus.KEEP_POLLED) if polled
+                 else hostbus.Merge(deliver, hold=hostbus.HOLD))
         addr = hostbus.address(node.context.get_domain_id(), topic_name, node.get_fully_qualified_name())
         depth = qos.depth if qos.history == HistoryPolicy.KEEP_LAST else 1 << 30
         try:

@@ -59,6 +59,10 @@ from rwpend_ros.intra import take_copy
 CALLBACK_LOCK = threading.RLock()
 #: fast-delivered messages per subscription whose DDS copy has not come yet
 KEEP = 1024
+#: ... for a polled subscriber (the recorder): its DDS copies (a composed process writes some
+#: topics to DDS for its own nodes) may lag far behind on a busy recorder; one older than this
+#: would be taken for a new message
+KEEP_POLLED = 8192
 #: largest message sent fast (the loop's messages are < 200 bytes); a bigger one goes by DDS
 #: alone (Sender.send), so a receiver never reads a cut datagram
 MAX_DATAGRAM = 65536
@@ -160,14 +164,14 @@ class Merge:
     __slots__ = ('deliver', 'hold', 'drain', 'fast_mode', 'pending', 'newest_fast', 'held', 'waiting', 'last_dds',
                  'accepted', 'fast', 'dds', 'duplicates', 'skipped', 'resyncs')
 
-    def __init__(self, deliver: Callable[[bytes], None], hold: int = 0) -> None:
+    def __init__(self, deliver: Callable[[bytes], None], hold: int = 0, keep: int = KEEP) -> None:
         self.deliver = deliver
         #: messages held at most (default :data:`HOLD`; a recorder, which can wait, holds more)
         self.hold = hold or HOLD
         #: takes what the fast path has brought and not handed over yet (Receiver.drain)
         self.drain: Callable[[], None] | None = None
         self.fast_mode = False
-        self.pending: deque[bytes] = deque(maxlen=KEEP)
+        self.pending: deque[bytes] = deque(maxlen=keep)
         self.newest_fast: bytes | None = None
         #: fast messages (data, deliver, stamp, marker) waiting for a marker
         self.held: list[tuple[bytes, bool, int, bytes | None]] = []
