@@ -14,9 +14,11 @@ recorder's fast receivers have no thread each: one thread drains them all every
 :data:`FAST_POLL_S`, and a message's log time is the kernel's time of its arrival in the socket.
 Each publisher's connection holds hundreds of messages (rwpend_ros.hostbus.SEND_BUFFER); a
 message that reaches the recorder through DDS instead (a recorder starved for longer than
-that, a publisher on another host) is logged at its callback's time, which can be milliseconds
-late: the cross-topic order of the log times can break in such stretches. Each message is
-still recorded once, in order.
+that, a publisher on another host), like every message of the other topics, is logged at the
+time DDS received it (rclpy's message info, as rosbag2 does), so log times compare across the
+two paths (PERFORMANCE.md, 16.). Each message is recorded once, in order. With
+``RWPEND_RECORDER_FAST_PATH=0`` every message comes through DDS and is logged at its callback's
+time (the EventsExecutor, which cannot hand over the message info in rclpy 7.1.6).
 
 ``progress`` (``rwpend record --progress TOPIC``, set by ``./rwpend up --lockstep --record``): every
 :data:`rwpend_ros.common.RECORDER_PROGRESS_EVERY` ``/clock`` messages taken (handed to the bag

@@ -162,7 +162,7 @@ class Merge:
     delivered then, late: nothing is lost."""
 
     __slots__ = ('deliver', 'hold', 'drain', 'fast_mode', 'pending', 'newest_fast', 'held', 'waiting', 'last_dds',
-                 'accepted', 'fast', 'dds', 'duplicates', 'skipped', 'resyncs')
+                 'accepted', 'fast', 'dds', 'duplicates', 'skipped', 'resyncs', 'keep', 'syncing', 'sync_set')
 
     def __init__(self, deliver: Callable[[bytes], None], hold: int = 0, keep: int = KEEP) -> None:
         self.deliver = deliver
@@ -173,6 +173,11 @@ class Merge:
         self.fast_mode = False
         self.pending: deque[bytes] = deque(maxlen=keep)
         self.newest_fast: bytes | None = None
+        #: syncing: the fast messages (data, deliver, stamp, marker) DDS has not brought yet, in
+        #: order (at most ``keep``), and their bytes
+        self.keep = keep
+        self.syncing: deque[tuple[bytes, bool, int, bytes | None]] = deque()
+        self.sync_set: set[bytes] = set()
         #: fast messages (data, deliver, stamp, marker) waiting for a marker
         self.held: list[tuple[bytes, bool, int, bytes | None]] = []
         self.waiting: bytes | None = None          # ... the marker
@@ -197,17 +202,26 @@ class Merge:
                 self._flush(force=True)
             return
         if not self.fast_mode and not fast_only:
-            self.newest_fast = data              # DDS delivers it
+            self.newest_fast = data              # DDS delivers it, unless DDS catches up first
+            self.syncing.append((data, deliver, stamp, marker))
+            self.sync_set.add(data)
+            if len(self.syncing) > self.keep:
+                self.sync_set.discard(self.syncing.popleft()[0])
             return
         if not self._seen(marker):  # the publisher wrote a message to DDS alone that has not come yet
             self.held.append((data, deliver, stamp, marker))
             self.waiting = marker
             return
         if not self.fast_mode:
-            self.fast_mode = True                # DDS brought all the publisher wrote to it
-            self.newest_fast = None
+            self._to_fast_mode()                 # DDS brought all the publisher wrote to it
         self.accepted = marker
         self._take(data, deliver, stamp)
+
+    def _to_fast_mode(self) -> None:
+        self.fast_mode = True
+        self.newest_fast = None
+        self.syncing.clear()
+        self.sync_set.clear()
 
     def _seen(self, marker: bytes | None) -> bool:
         """Whether this subscription has the message ``marker`` (from either path)."""
@@ -239,8 +253,7 @@ class Merge:
         of them); -> fast mode. A marker that comes after all is delivered then: late, never
         lost."""
         held, self.held = self.held, []
-        self.fast_mode = True
-        self.newest_fast = None
+        self._to_fast_mode()
         self.waiting = None
         for i, (data, deliver, stamp, marker) in enumerate(held):
             if not force and i and not self._seen(marker):
@@ -273,9 +286,26 @@ class Merge:
         if self.held:
             if data == self.waiting:
                 self._flush()
-        elif self.newest_fast is not None and data == self.newest_fast:
-            self.fast_mode = True
-            self.newest_fast = None
+        elif data in self.sync_set:
+            self._sync(data)
+
+    def _sync(self, data: bytes) -> None:
+        """Syncing, DDS just delivered ``data``, which the fast path brought too: DDS has
+        delivered everything up to it, so the fast messages after it are delivered now (a
+        slow DDS reader need not catch up with the newest one) and their DDS copies dropped;
+        -> fast mode. One whose marker has not come (the publisher wrote a message to DDS alone
+        in between) is held with those after it, as in :meth:`from_fast`."""
+        while self.syncing and self.syncing.popleft()[0] != data:
+            pass
+        rest = list(self.syncing)
+        self._to_fast_mode()
+        for j, (d, deliver, stamp, marker) in enumerate(rest):
+            if not self._seen(marker):
+                self.held = rest[j:]
+                self.waiting = marker
+                return
+            self.accepted = marker
+            self._take(d, deliver, stamp)
 
     def counters(self) -> dict[str, int]:
         return {'fast': self.fast, 'dds': self.dds, 'duplicates': self.duplicates,

@@ -197,7 +197,8 @@ class SimNode(RwNode):
                 self.recorder_k = k
             if self.held_for_recorder and not self._recorder_behind():
                 self._release_hold()
-                self._publish_lockstep()
+                if not self.stop.is_set():
+                    self._publish_lockstep()
 
     def _recorder_behind(self) -> bool:
         """Lock held: sample core.k must wait for the recorder."""
