@@ -154,30 +154,27 @@ class Recorder(Node):
                                    f'{"reliable" if reliable else "best effort"}')
 
     def _receiver(self, name: str, progress: bool = False):
+        """Callback of a DDS-only topic: into the writer's queue, logged at DDS's reception time
+        (``dds_info``: rclpy then passes the message info) or at the callback's; ``progress``:
+        the recorder's progress is counted on it (/clock)."""
         put = self.writer.put
         counter = self._received
-
-        def receive(data, _n=name, _put=put, _now=time.time_ns, _count=counter):
-            _put(_n, data, _now())
-            _count[0] += 1
+        taken = self._clock_taken if progress and self.progress_pub is not None else None
 
         if self.dds_info:
-            def receive(data, info, _n=name, _put=put, _now=time.time_ns, _count=counter):  # noqa: F811
+            def receive(data, info, _n=name, _put=put, _now=time.time_ns, _count=counter, _taken=taken):
                 _put(_n, data, info.get('received_timestamp') or _now())
                 _count[0] += 1
-
-            if progress and self.progress_pub is not None:
-                def receive_clock_info(data, info, _receive=receive, _taken=self._clock_taken):
-                    _receive(data, info)
+                if _taken is not None:
                     _taken(data)
-                return receive_clock_info
             return receive
-        if progress and self.progress_pub is not None:
-            def receive_clock(data, _receive=receive, _taken=self._clock_taken):
-                _receive(data)
+
+        def receive_now(data, _n=name, _put=put, _now=time.time_ns, _count=counter, _taken=taken):
+            _put(_n, data, _now())
+            _count[0] += 1
+            if _taken is not None:
                 _taken(data)
-            return receive_clock
-        return receive
+        return receive_now
 
     def _clock_taken(self, data: bytes) -> None:
         """A /clock message is in the writer's queue: every RECORDER_PROGRESS_EVERY of them,

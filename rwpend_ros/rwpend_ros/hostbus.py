@@ -161,7 +161,7 @@ class Merge:
     keep-last reader lost it -- does not stop the stream). A marker that comes after all is
     delivered then, late: nothing is lost."""
 
-    __slots__ = ('deliver', 'hold', 'drain', 'fast_mode', 'pending', 'newest_fast', 'held', 'waiting', 'last_dds',
+    __slots__ = ('deliver', 'hold', 'drain', 'fast_mode', 'pending', 'held', 'waiting', 'last_dds',
                  'accepted', 'fast', 'dds', 'duplicates', 'skipped', 'resyncs', 'keep', 'syncing', 'sync_set')
 
     def __init__(self, deliver: Callable[[bytes], None], hold: int = 0, keep: int = KEEP) -> None:
@@ -172,7 +172,6 @@ class Merge:
         self.drain: Callable[[], None] | None = None
         self.fast_mode = False
         self.pending: deque[bytes] = deque(maxlen=keep)
-        self.newest_fast: bytes | None = None
         #: syncing: the fast messages (data, deliver, stamp, marker) DDS has not brought yet, in
         #: order (at most ``keep``), and their bytes
         self.keep = keep
@@ -202,7 +201,6 @@ class Merge:
                 self._flush(force=True)
             return
         if not self.fast_mode and not fast_only:
-            self.newest_fast = data              # DDS delivers it, unless DDS catches up first
             self.syncing.append((data, deliver, stamp, marker))
             self.sync_set.add(data)
             if len(self.syncing) > self.keep:
@@ -219,9 +217,13 @@ class Merge:
 
     def _to_fast_mode(self) -> None:
         self.fast_mode = True
-        self.newest_fast = None
         self.syncing.clear()
         self.sync_set.clear()
+
+    @property
+    def newest_fast(self) -> bytes | None:
+        """Syncing: the newest fast message DDS has not brought yet (None: none)."""
+        return self.syncing[-1][0] if self.syncing else None
 
     def _seen(self, marker: bytes | None) -> bool:
         """Whether this subscription has the message ``marker`` (from either path)."""
@@ -235,11 +237,11 @@ class Merge:
             if not stamp:            # a receiving thread's message: no arrival time to hand on
                 self.deliver(data)
                 return
-            before, _STAMP.ns = getattr(_STAMP, 'ns', 0), stamp
+            before = set_stamp(stamp)
             try:
                 self.deliver(data)
             finally:
-                _STAMP.ns = before     # a DDS message being delivered keeps its own (set_stamp)
+                set_stamp(before)      # a DDS message being delivered keeps its own
         else:
             self.skipped += 1
 
@@ -279,7 +281,6 @@ class Merge:
             return
         if self.fast_mode:
             self.fast_mode = False       # the fast path missed this one: DDS alone until they meet
-            self.newest_fast = None
             self.resyncs += 1
         self.dds += 1
         self.deliver(data)
