@@ -24,7 +24,11 @@ time (the EventsExecutor, which cannot hand over the message info in rclpy 7.1.6
 :data:`rwpend_ros.common.RECORDER_PROGRESS_EVERY` ``/clock`` messages taken (handed to the bag
 writer, whose queue loses nothing), that ``/clock`` is published on TOPIC; a lockstep simulator
 keeps within its ``lockstep_recorder_window`` of it, so a recorder that falls behind slows the
-run down instead of losing messages.
+run down instead of losing messages. The progress is held back while a fast topic's
+:class:`rwpend_ros.hostbus.Merge` waits for DDS (a message its publisher wrote to DDS alone, the
+copies DDS has not brought yet): the bag is complete only up to there, and a recorder whose DDS
+reader lags far behind would otherwise have to deliver those messages late, out of order
+(PERFORMANCE.md, 17.).
 """
 from __future__ import annotations
 
@@ -50,10 +54,12 @@ FAST_POLL_S = 0.002
 #: ... an eighth of it while a drain finds more than this many messages on one topic
 FAST_BACKLOG = 64
 #: types our nodes publish at the sample rate with rwpend_ros.common.LocalPublisher (the
-#: same-host fast path): the loop's, the simulator's truth and clock, the estimator's joint states
+#: same-host fast path): the loop's, the simulator's truth and clock, the estimator's joint
+#: states, the controller's status (every 10 samples)
 FAST_TYPES = frozenset({'rwpend_msgs/msg/EncoderCounts', 'rwpend_msgs/msg/StateEstimate',
                         'rwpend_msgs/msg/MotorCommand', 'rwpend_msgs/msg/PlantState',
-                        'sensor_msgs/msg/JointState', 'rosgraph_msgs/msg/Clock'})
+                        'sensor_msgs/msg/JointState', 'rosgraph_msgs/msg/Clock',
+                        'rwpend_msgs/msg/ControllerStatus'})
 POLL_S = 0.5
 DRAIN_IDLE_S = 0.25    # on stop: keep recording until nothing arrived for this long ...
 DRAIN_LIMIT_S = 2.0    # ... or this long at most (a second Ctrl-C ends it at once)
@@ -89,6 +95,9 @@ class Recorder(Node):
             self.progress_pub = self.create_publisher(Clock, progress, QOS_PROGRESS)
             self.progress_topic = self.progress_pub.topic_name
         self._clocks = 0
+        #: the /clock to report as the progress once no fast topic waits for DDS (None: none due)
+        self._progress_due: bytes | None = None
+        self.progress_held = 0       # drains that held the progress back (a merge waited for DDS)
         self.writer = ThreadedBagWriter(out_dir)
         self.wanted = set(topics or [])
         self.record_all = record_all
@@ -178,10 +187,34 @@ class Recorder(Node):
 
     def _clock_taken(self, data: bytes) -> None:
         """A /clock message is in the writer's queue: every RECORDER_PROGRESS_EVERY of them,
-        published as the progress (the same bytes: rosgraph_msgs/Clock)."""
+        published as the progress (the same bytes: rosgraph_msgs/Clock) -- unless a fast topic
+        waits for DDS (:meth:`_waiting_for_dds`): then the newest due is published once it no
+        longer does (:meth:`_report_progress`, at the next drain of the fast path)."""
         self._clocks += 1
         if self._clocks % RECORDER_PROGRESS_EVERY == 0:
-            self.progress_pub.publish(bytes(data))
+            self._progress_due = data
+            self._report_progress()
+
+    def _waiting_for_dds(self) -> bool:
+        """Whether a fast topic has messages the bag does not have yet because DDS has not
+        brought them: held for a marker (its publisher wrote a message to DDS alone), or
+        syncing behind the fast path (CALLBACK_LOCK held)."""
+        for merge in getattr(self, 'hostbus_merges', {}).values():
+            if merge.held or (not merge.fast_mode and merge.syncing):
+                return True
+        return False
+
+    def _report_progress(self) -> None:
+        data = self._progress_due
+        if data is None:
+            return
+        with CALLBACK_LOCK:
+            behind = self._waiting_for_dds()
+        if behind:
+            self.progress_held += 1
+            return
+        self._progress_due = None
+        self.progress_pub.publish(bytes(data))
 
     def _fast_receiver(self, name: str):
         """Callback of a fast topic (either path; CALLBACK_LOCK held): into the batch, with the
@@ -215,6 +248,8 @@ class Recorder(Node):
                 if progress and name == '/clock':
                     self._clock_taken(data)
             self._received[0] += len(batch)
+        if self.progress_pub is not None:
+            self._report_progress()      # one held back: DDS may have brought what it waited for
         return most
 
     def _fast_loop(self) -> None:
@@ -263,6 +298,8 @@ class Recorder(Node):
         merges = getattr(self, 'hostbus_merges', {})
         if merges:       # how each fast topic reached the bag (PERFORMANCE.md 15.)
             extra['fast_path'] = {t: m.counters() for t, m in merges.items()}
+        if self.progress_pub is not None:
+            extra['progress_held'] = self.progress_held
         report = self.writer.close(extra)
         print_report(report)
         return report
@@ -275,6 +312,9 @@ def print_report(report: dict, file=sys.stdout) -> None:
     for name, c in report.get('fast_path', {}).items():
         print(f"  {name}: same-host fast path {c['fast']}, DDS {c['dds']} "
               f"(returns to DDS {c['resyncs']})", file=file)
+    if report.get('progress_held'):
+        print(f"  lockstep progress held back {report['progress_held']} time(s) while a fast topic "
+              f"waited for DDS", file=file)
     for name, why in report.get('skipped_topics', {}).items():
         print(f'  {name}: NOT RECORDED ({why})', file=file)
     if report.get('writer_error'):

@@ -158,6 +158,32 @@ def test_seq_of_and_tracker(records):
     assert tr2.report()['/e']['text'].startswith('recorded 50 of 50 (no gaps)')
 
 
+def test_tracker_late_messages_fill_their_gaps_restarts_do_not():
+    tr = SeqTracker()
+    # 0..9, then 15..19, then 10..14 late (a DDS copy behind the fast path), then 20..24
+    for s in [*range(10), *range(15, 20), 12, 10, 14, 11, 13, *range(20, 25)]:
+        tr.add_seq_array('/e', [s])
+    r = tr.report()['/e']
+    assert r['received'] == 25 and r['missing'] == 0 and r['gaps'] == []
+    assert r['out_of_order'] == 5 and r['late'] == 5 and r['seq']['last'] == 24
+    assert 'no gaps' in r['text'] and '5 came late' in r['text'] and 'went back' not in r['text']
+    # a gap left partly open: the rest is still missing
+    tr = SeqTracker()
+    for s in [0, 1, 5, 3, 6]:
+        tr.add_seq_array('/e', [s])
+    r = tr.report()['/e']
+    assert r['missing'] == 2 and r['gaps'] == [[2, 2], [4, 4]] and r['late'] == 1
+    # a publisher restart (seq from 0 again) is not a late message: the first run's gap stays
+    # missing, a late message of the new run fills the new run's gap only
+    tr = SeqTracker()
+    for s in [0, 1, 2, 4, 5, 0, 1, 3, 4, 2]:
+        tr.add_seq_array('/e', [s])
+    r = tr.report()['/e']
+    assert r['missing'] == 1 and r['gaps'] == [[3, 3]]
+    assert r['out_of_order'] == 2 and r['late'] == 1 and r['duplicates'] == 0
+    assert '1 came late' in r['text'] and '1 went back' in r['text']
+
+
 def test_threaded_writer_report(tmp_path, records):
     w = ThreadedBagWriter(tmp_path / 'tw')
     w.add_topic('/rwpend/encoders', 'rwpend_msgs/msg/EncoderCounts', default_qos())

@@ -133,7 +133,9 @@ class ControllerNode(RwNode):
         self.add_post_set_parameters_callback(self.on_parameters_set)
         # command reaches a simulator in this process directly (composed mode, rwpend_ros.intra)
         self.pub_cmd = LocalPublisher(self, MotorCommand, 'command', QOS_CONTROL_PUB)
-        self.pub_status = self.create_publisher(ControllerStatus, 'controller/status', QOS_STATUS)
+        # status too: a recorder on this host takes it through the fast path (its DDS copy would
+        # wake the recorder's executor every 10 samples: PERFORMANCE.md, 17.)
+        self.pub_status = LocalPublisher(self, ControllerStatus, 'controller/status', QOS_STATUS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         depth = self.get_parameter('state_queue_depth').value
         if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= 10000:
