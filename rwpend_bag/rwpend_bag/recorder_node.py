@@ -26,7 +26,7 @@ writer, whose queue loses nothing), that ``/clock`` is published on TOPIC; a loc
 keeps within its ``lockstep_recorder_window`` of it, so a recorder that falls behind slows the
 run down instead of losing messages. The progress is held back while a fast topic's
 :class:`rwpend_ros.hostbus.Merge` waits for DDS (a message its publisher wrote to DDS alone, the
-copies DDS has not brought yet): the bag is complete only up to there, and a recorder whose DDS
+copies DDS has not brought yet; for PROGRESS_DDS_WAIT_S at most): the bag is complete only up to there, and a recorder whose DDS
 reader lags far behind would otherwise have to deliver those messages late, out of order
 (PERFORMANCE.md, 17.).
 """
@@ -61,6 +61,10 @@ FAST_TYPES = frozenset({'rwpend_msgs/msg/EncoderCounts', 'rwpend_msgs/msg/StateE
                         'sensor_msgs/msg/JointState', 'rosgraph_msgs/msg/Clock',
                         'rwpend_msgs/msg/ControllerStatus'})
 POLL_S = 0.5
+#: longest the progress is held back for one fast topic waiting for DDS (s): a DDS copy that
+#: never comes (its publisher died before DDS sent it) must not stop a lockstep run, whose
+#: simulator gives up on the recorder after lockstep_recorder_timeout (5 s)
+PROGRESS_DDS_WAIT_S = 2.0
 DRAIN_IDLE_S = 0.25    # on stop: keep recording until nothing arrived for this long ...
 DRAIN_LIMIT_S = 2.0    # ... or this long at most (a second Ctrl-C ends it at once)
 
@@ -98,6 +102,7 @@ class Recorder(Node):
         #: the /clock to report as the progress once no fast topic waits for DDS (None: none due)
         self._progress_due: bytes | None = None
         self.progress_held = 0       # drains that held the progress back (a merge waited for DDS)
+        self._dds_wait_since: dict[str, float] = {}   # fast topic -> when it began to wait
         self.writer = ThreadedBagWriter(out_dir)
         self.wanted = set(topics or [])
         self.record_all = record_all
@@ -198,11 +203,24 @@ class Recorder(Node):
     def _waiting_for_dds(self) -> bool:
         """Whether a fast topic has messages the bag does not have yet because DDS has not
         brought them: held for a marker (its publisher wrote a message to DDS alone), or
-        syncing behind the fast path (CALLBACK_LOCK held)."""
-        for merge in getattr(self, 'hostbus_merges', {}).values():
-            if merge.held or (not merge.fast_mode and merge.syncing):
-                return True
-        return False
+        syncing behind the fast path (CALLBACK_LOCK held) -- for PROGRESS_DDS_WAIT_S at most
+        per episode (then a warning, and the run goes on)."""
+        waiting = False
+        now = time.monotonic()
+        since = self._dds_wait_since
+        for name, merge in getattr(self, 'hostbus_merges', {}).items():
+            if not (merge.held or (not merge.fast_mode and merge.syncing)):
+                since.pop(name, None)
+                continue
+            t0 = since.setdefault(name, now)
+            if now - t0 < PROGRESS_DDS_WAIT_S:
+                waiting = True
+            elif t0 > 0:
+                since[name] = 0.0    # reported once per episode
+                self.get_logger().warn(
+                    f'{name}: DDS has not brought what the fast path waits for in '
+                    f'{PROGRESS_DDS_WAIT_S:g} s; reporting progress anyway (messages may be late)')
+        return waiting
 
     def _report_progress(self) -> None:
         data = self._progress_due

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import random
+import time
 
 import pytest
 import rclpy
@@ -15,6 +16,7 @@ from rwpend_ros import hostbus
 from rwpend_ros.common import RECORDER_PROGRESS_EVERY
 from rwpend_ros.transport import apply_transport
 
+from rwpend_bag import recorder_node
 from rwpend_bag.recorder_node import Recorder
 
 
@@ -80,3 +82,19 @@ def test_progress_waits_while_dds_is_behind_the_fast_path(recorder):
     assert got == [b's0'] and merge.fast_mode
     recorder.poll_fast()
     assert recorder.progress_pub == [b'clock%d' % (RECORDER_PROGRESS_EVERY - 1)]
+
+
+def test_progress_is_held_back_for_a_bounded_time(recorder, monkeypatch):
+    """A DDS copy that never comes (its publisher died before DDS sent it) does not stop a
+    lockstep run: after PROGRESS_DDS_WAIT_S the progress goes on (with a warning)."""
+    monkeypatch.setattr(recorder_node, 'PROGRESS_DDS_WAIT_S', 0.05)
+    merge = hostbus.Merge(lambda data: None, hold=hostbus.KEEP, keep=hostbus.KEEP_POLLED)
+    recorder.hostbus_merges = {'/state': merge}
+    merge.from_fast(b's0')                            # its DDS copy never comes
+    clocks(recorder, RECORDER_PROGRESS_EVERY)
+    assert recorder.progress_pub == []
+    time.sleep(0.06)
+    recorder.poll_fast()
+    assert recorder.progress_pub == [b'clock%d' % (RECORDER_PROGRESS_EVERY - 1)]
+    clocks(recorder, RECORDER_PROGRESS_EVERY, start=RECORDER_PROGRESS_EVERY)   # still waiting:
+    assert len(recorder.progress_pub) == 2            # not held again in the same episode
