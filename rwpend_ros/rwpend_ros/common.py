@@ -184,9 +184,14 @@ def sample_time(node) -> SampleTime | None:
 
 #: how often (s, steady clock) a publisher with the same-host fast path looks at its number of
 #: subscribers; the graph is read when it changed, when a receiver was dropped, and every
-#: HOST_RETRY_PERIOD s (a receiver absent at the last reading may have come since)
+#: HOST_RETRY_PERIOD s (a receiver absent at the last reading may have come since) -- at every
+#: look for HOST_SETTLE_PERIOD s after the number changed while the fast path reaches fewer
+#: subscribers than DDS matched (the graph and the matching come apart at start-up: a
+#: subscriber missing from one reading would otherwise get every message through DDS, and its
+#: publisher write them all, for HOST_RETRY_PERIOD s; PERFORMANCE.md, 17.)
 HOST_REFRESH_PERIOD = 0.25
 HOST_RETRY_PERIOD = 2.0
+HOST_SETTLE_PERIOD = 2.0
 
 
 def qos_matches(pub, sub) -> bool:
@@ -221,6 +226,8 @@ class LocalPublisher:
             self._domain = node.context.get_domain_id()
             self._count = -1
             self._ticks = 0
+            self._seen = -1          # the number of subscribers at the last look ...
+            self._steady = 0         # ... and for how many looks it has not changed
             node.create_timer(HOST_REFRESH_PERIOD, self._refresh, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _refresh(self) -> None:
@@ -228,7 +235,13 @@ class LocalPublisher:
         whose QoS does not match the publisher's gets nothing from DDS, nor from here)."""
         count = self.pub.get_subscription_count()
         self._ticks += 1
-        if (count == self._count and not self.sender.dropped
+        if count != self._seen:
+            self._seen, self._steady = count, 0
+        else:
+            self._steady += 1
+        settling = (len(self.sender.targets) + len(BUS.local(self.topic)) < count
+                    and self._steady * HOST_REFRESH_PERIOD < HOST_SETTLE_PERIOD)
+        if (count == self._count and not self.sender.dropped and not settling
                 and self._ticks * HOST_REFRESH_PERIOD < HOST_RETRY_PERIOD):
             return
         try:

@@ -68,3 +68,40 @@ def test_a_bad_host_bus_setting_stops_the_process_before_rclpy(monkeypatch, caps
     built = []
     assert run_nodes([lambda: built.append(1)]) == 2
     assert built == [] and 'RWPEND_HOST_BUS' in capsys.readouterr().err
+
+
+def test_a_subscriber_the_fast_path_misses_is_looked_for_at_every_tick_for_a_while(nodes, monkeypatch):
+    """DDS matched a subscriber the fast path does not reach (absent from a graph reading, or
+    its receiver not there at the first send): the graph is read again at every tick for
+    HOST_SETTLE_PERIOD after the number of subscribers changed, not only every
+    HOST_RETRY_PERIOD -- or its publisher writes every message to DDS for that long."""
+    from types import SimpleNamespace
+
+    from rwpend_ros.common import HOST_REFRESH_PERIOD, HOST_RETRY_PERIOD, HOST_SETTLE_PERIOD
+    a, _ = nodes
+    pub = LocalPublisher(a, MotorCommand, 'command', QOS_CONTROL_PUB)
+    assert pub.sender is not None
+    info = SimpleNamespace(node_namespace='/intra_test', node_name='not_there', qos_profile=QOS_CONTROL)
+    reads = []
+    monkeypatch.setattr(pub.pub, 'get_subscription_count', lambda: 1)
+    monkeypatch.setattr(a, 'get_subscriptions_info_by_topic', lambda topic: reads.append(topic) or [info])
+    header = wire.pack_header(0, 0, 'rwpend')
+
+    def tick(i):
+        pub.publish(wire.pack_command(header, i, 0.0))   # the send fails: gone from the targets
+        assert pub.sender.targets == ()
+        pub._refresh()
+
+    pub._refresh()
+    assert len(reads) == 1 and len(pub.sender.targets) == 1
+    settle = int(HOST_SETTLE_PERIOD / HOST_REFRESH_PERIOD)
+    for i in range(settle - 1):
+        tick(i)
+    assert len(reads) == settle          # every tick while settling
+    for i in range(4):
+        tick(i)                          # settled: back to every HOST_RETRY_PERIOD
+    n = len(reads)
+    for i in range(int(HOST_RETRY_PERIOD / HOST_REFRESH_PERIOD) - 1):
+        tick(i)
+    assert len(reads) <= n + 1
+    assert pub.dds_writes > 0            # meanwhile DDS carried every message: nothing lost
