@@ -112,11 +112,13 @@ class EstimatorNode(RwNode):
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire): no message
         # objects built or converted field by field (measured: PERFORMANCE.md)
         # also straight from a plant / controller in another process of this host
-        # (rwpend_ros.hostbus); not through the in-process bus: a command of a controller of this
-        # process would re-enter this node while it publishes the state the command answers
+        # (rwpend_ros.hostbus). A command of a controller of this process comes through the
+        # in-process bus: published while this node publishes the state it answers, it is
+        # delivered right after that callback returns (rwpend_ros.intra: deferred), with no DDS
+        # copy. Encoders stay off the bus (a composed lockstep run would go on in one callback)
         local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL, intra=False)
-        self.command_topic = local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
-                                                intra=False).topic_name
+        self.command_topic = local_subscription(self, MotorCommand, 'command', self.on_command_raw,
+                                                QOS_CONTROL).topic_name
         self.create_service(Trigger, '~/reset', self.on_reset)
         self.create_timer(float(period), self.publish_diagnostics)
 

@@ -5,6 +5,7 @@ rwpend_control, ...); this module only deals with rclpy.
 """
 from __future__ import annotations
 
+import functools
 import os
 import struct
 import sys
@@ -68,14 +69,24 @@ QOS_LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=History
                          depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def locked(callback):
-    """``callback`` run holding :data:`rwpend_ros.hostbus.CALLBACK_LOCK` (also a decorator)."""
+def locked(callback, owner=None):
+    """``callback`` run holding :data:`rwpend_ros.hostbus.CALLBACK_LOCK` (also a decorator);
+    with ``owner`` (its node), as a callback of that node for the in-process bus
+    (:meth:`rwpend_ros.intra.LocalBus.call`: a message the bus has for the node meanwhile waits
+    until it returns)."""
     if callback is None:
         return None
 
-    def run(*args, **kwargs):
-        with CALLBACK_LOCK:
-            return callback(*args, **kwargs)
+    if owner is None:
+        def run(*args, **kwargs):
+            with CALLBACK_LOCK:
+                return callback(*args, **kwargs)
+    else:
+        call = BUS.call
+
+        def run(*args, **kwargs):
+            with CALLBACK_LOCK:
+                return call(owner, lambda: callback(*args, **kwargs))
     run.__wrapped__ = callback
     return run
 
@@ -89,22 +100,22 @@ class LockedCallbacks:
     methods: decorate its transition callbacks with :func:`locked`.)"""
 
     def create_subscription(self, msg_type, topic, callback, *args, **kwargs):
-        return super().create_subscription(msg_type, topic, locked(callback), *args, **kwargs)
+        return super().create_subscription(msg_type, topic, locked(callback, self), *args, **kwargs)
 
     def create_timer(self, timer_period_sec, callback, *args, **kwargs):
-        return super().create_timer(timer_period_sec, locked(callback), *args, **kwargs)
+        return super().create_timer(timer_period_sec, locked(callback, self), *args, **kwargs)
 
     def create_service(self, srv_type, srv_name, callback, *args, **kwargs):
-        return super().create_service(srv_type, srv_name, locked(callback), *args, **kwargs)
+        return super().create_service(srv_type, srv_name, locked(callback, self), *args, **kwargs)
 
     def add_on_set_parameters_callback(self, callback):
-        return super().add_on_set_parameters_callback(locked(callback))
+        return super().add_on_set_parameters_callback(locked(callback, self))
 
     def add_pre_set_parameters_callback(self, callback):
-        return super().add_pre_set_parameters_callback(locked(callback))
+        return super().add_pre_set_parameters_callback(locked(callback, self))
 
     def add_post_set_parameters_callback(self, callback):
-        return super().add_post_set_parameters_callback(locked(callback))
+        return super().add_post_set_parameters_callback(locked(callback, self))
 
 
 class RwNode(LockedCallbacks, Node):
@@ -317,8 +328,8 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
     fast path's :class:`rwpend_ros.hostbus.Merge` is in ``node.hostbus_merges[topic]``, its
     receiver in ``node.hostbus_receivers[topic]``."""
     topic_name = node.resolve_topic_name(topic)
-    local = BUS.subscribe(topic_name, callback, before_dds) if intra else None
-    deliver = local.run if local is not None else callback
+    local = BUS.subscribe(topic_name, callback, before_dds, owner=node) if intra else None
+    deliver = local.run if local is not None else functools.partial(BUS.call, node, callback)
     merge = receiver = None
     if host and hostbus.enabled():
         # bound before the subscription shows in the graph: a publisher that sees it can send

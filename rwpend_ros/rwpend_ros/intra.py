@@ -18,8 +18,12 @@ Rules (what keeps it safe):
   (:attr:`LocalBus.extra_threads`, :mod:`rwpend_ros.hostbus`; they hold the process's callback
   lock): a publish from another thread (the simulator's real-time sample loop) goes through
   DDS as before, so a node's callbacks still run one at a time;
-* a local subscriber whose callback is running already (on the stack, further up) is not
-  entered again: the message then takes the DDS path like any other;
+* a subscriber whose node (its ``owner``) has a callback running already (on the stack,
+  further up: :meth:`LocalBus.call` marks the node busy) is not entered again: the message is
+  *deferred*, delivered on the same thread, holding the same lock, right after the outermost
+  callback returns (:meth:`LocalBus.call`), in the order published. So an estimator composed
+  with its controller takes command k after it has published state k and before anything
+  else -- the order of separate processes -- and needs no DDS copy (PERFORMANCE.md, 18.);
 * the message is published on DDS too, after the local delivery: other processes (the
   recorder, a monitor) see exactly what they saw before;
 * the DDS copy of a message the subscriber already got through the bus is dropped by its DDS
@@ -27,16 +31,18 @@ Rules (what keeps it safe):
   another process is delivered as before;
 * ``RWPEND_INTRA_PROCESS=0`` turns the bus off (for comparisons).
 
-Only topics whose subscriber opts in use it (``state`` -> controller, ``command`` -> simulator),
-and no callback reached through it publishes on a bus topic the chain came from, so a local
-delivery never cycles.
+Only topics whose subscriber opts in use it (``state`` -> controller, ``command`` -> simulator
+and estimator). ``encoders`` -> estimator stays out: in a composed lockstep run every sample
+would then be deferred from the one before (simulator -> estimator -> controller -> simulator),
+and the whole run would go on in one flush, the executor never getting its thread back. So a
+chain of local deliveries ends after one sample.
 """
 from __future__ import annotations
 
 import os
 import threading
 from collections import deque
-from typing import Callable
+from typing import Callable, Hashable
 
 #: how many locally delivered messages per subscription wait for their DDS copy
 KEEP = 64
@@ -55,24 +61,30 @@ def take_copy(pending: deque, data: bytes) -> bool:
 
 
 class _LocalSub:
-    __slots__ = ('callback', 'before_dds', 'pending', 'active', 'delivered', 'duplicates', 'sink')
+    __slots__ = ('bus', 'callback', 'owner', 'before_dds', 'pending', 'delivered', 'deferred',
+                 'duplicates', 'sink')
 
-    def __init__(self, callback: Callable[[bytes], None], before_dds: bool = True) -> None:
+    def __init__(self, bus: 'LocalBus', callback: Callable[[bytes], None], before_dds: bool = True,
+                 owner: Hashable = None) -> None:
+        self.bus = bus
         self.callback = callback
+        #: the node whose callbacks run one at a time (None: the subscription alone)
+        self.owner = self if owner is None else owner
         self.before_dds = before_dds  # delivered before the DDS write (else right after it)
         self.pending: deque[bytes] = deque(maxlen=KEEP)   # delivered locally, DDS copy not seen yet
-        self.active = False          # its callback is running (on the executor's thread)
         self.delivered = 0           # messages delivered through the bus
+        self.deferred = 0            # of those, delivered after the callback of its node returned
         self.duplicates = 0          # DDS copies dropped
         #: where a DDS message not delivered locally goes (run; the same-host fast path's merge)
         self.sink: Callable[[bytes], None] = self.run
 
+    @property
+    def active(self) -> bool:
+        """A callback of its node is running (on the stack)."""
+        return self.owner in self.bus.busy
+
     def run(self, data: bytes) -> None:
-        self.active = True
-        try:
-            self.callback(data)
-        finally:
-            self.active = False
+        self.bus.call(self.owner, self.callback, data)
 
     def from_dds(self, data: bytes) -> None:
         """The DDS subscription's callback: drops the copy of a message the bus delivered."""
@@ -94,13 +106,21 @@ class LocalBus:
         #: idents of other threads that run callbacks holding the callback lock (hostbus)
         self.extra_threads: set[int] = set()
         self.topics: dict[str, list[_LocalSub]] = {}
+        #: owner -> how many of its callbacks are on the stack (all under the callback lock)
+        self.busy: dict[Hashable, int] = {}
+        #: callbacks running through :meth:`call` (nesting depth)
+        self.depth = 0
+        #: messages for busy owners, delivered when the outermost callback returns
+        self.deferred: deque[tuple[_LocalSub, bytes]] = deque()
 
-    def subscribe(self, topic: str, callback: Callable[[bytes], None], before_dds: bool = True) -> _LocalSub:
+    def subscribe(self, topic: str, callback: Callable[[bytes], None], before_dds: bool = True,
+                  owner: Hashable = None) -> _LocalSub:
         """Register ``callback`` for ``topic``; give the returned object's ``from_dds`` to the
         DDS subscription as its callback. ``before_dds``: called before the message is written
         to DDS (the shortest path), else right after it (the DDS readers, in this process too,
-        then get the message before anything the callback publishes)."""
-        sub = _LocalSub(callback, before_dds)
+        then get the message before anything the callback publishes). ``owner``: the node (its
+        other callbacks mark it busy through :meth:`call`); None = the subscription alone."""
+        sub = _LocalSub(self, callback, before_dds, owner)
         self.topics.setdefault(topic, []).append(sub)
         return sub
 
@@ -112,7 +132,8 @@ class LocalBus:
             self.topics.pop(topic, None)
 
     def local(self, topic: str) -> list[_LocalSub]:
-        """The subscriptions a publish on ``topic`` from this thread delivers to directly."""
+        """The subscriptions a publish on ``topic`` from this thread delivers to directly (now,
+        or deferred when their node is busy)."""
         if not self.enabled or self.thread is None:
             return []
         subs = self.topics.get(topic)
@@ -121,12 +142,12 @@ class LocalBus:
         ident = threading.get_ident()
         if ident != self.thread and ident not in self.extra_threads:
             return []
-        return [s for s in subs if not s.active]
+        return subs
 
     def publish(self, topic: str, data: bytes, dds_publish: Callable[[bytes], None]) -> None:
-        """Deliver ``data`` to the local subscribers of ``topic`` (in their callbacks, now) and
-        publish it on DDS with ``dds_publish``: the ``before_dds`` subscribers first, then the
-        DDS write, then the others."""
+        """Deliver ``data`` to the local subscribers of ``topic`` (in their callbacks, now, or
+        deferred if their node is busy) and publish it on DDS with ``dds_publish``: the
+        ``before_dds`` subscribers first, then the DDS write, then the others."""
         subs = self.local(topic)
         if not subs:
             dds_publish(data)
@@ -136,22 +157,62 @@ class LocalBus:
         try:
             for sub in subs:
                 if sub.before_dds:
-                    sub.pending.append(data)
-                    sub.delivered += 1
-                    sub.run(data)
+                    self._deliver(sub, data)
         finally:   # whatever a local callback did, the message goes out on DDS (recorded)
             dds_publish(data)
         for sub in subs:   # not reached when a callback above raised: DDS delivers to these
-            if not sub.before_dds and not sub.active:
-                sub.pending.append(data)
-                sub.delivered += 1
+            if not sub.before_dds:
+                self._deliver(sub, data)
+
+    def _deliver(self, sub: _LocalSub, data: bytes) -> None:
+        sub.pending.append(data)
+        sub.delivered += 1
+        if sub.owner in self.busy:
+            sub.deferred += 1
+            self.deferred.append((sub, data))
+        else:
+            sub.run(data)
+
+    def call(self, owner: Hashable, fn: Callable, *args):
+        """``fn(*args)`` as a callback of ``owner`` (its node): marked busy meanwhile, so a
+        message for it published meanwhile waits; when the outermost such call returns, the
+        messages deferred meanwhile are delivered, in order (and those they defer in turn).
+        Called holding the process's callback lock. If ``fn`` raises, what was deferred waits
+        for the next outermost call to return."""
+        busy = self.busy
+        busy[owner] = busy.get(owner, 0) + 1
+        self.depth += 1
+        try:
+            result = fn(*args)
+        finally:
+            self.depth -= 1
+            n = busy[owner] - 1
+            if n:
+                busy[owner] = n
+            else:
+                del busy[owner]
+        if not self.depth and self.deferred:
+            self._flush()
+        return result
+
+    def _flush(self) -> None:
+        deferred = self.deferred
+        self.depth += 1          # the calls below do not flush in turn: this loop does
+        try:
+            while deferred:
+                sub, data = deferred.popleft()
                 sub.run(data)
+        finally:
+            self.depth -= 1
 
     def reset(self) -> None:
         """Off, and no subscription (run_nodes, when its nodes are destroyed)."""
         self.thread = None
         self.extra_threads.clear()
         self.topics.clear()
+        self.busy.clear()
+        self.deferred.clear()
+        self.depth = 0
 
 
 #: the bus of this process

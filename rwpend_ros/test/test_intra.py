@@ -57,19 +57,61 @@ def test_off_outside_the_executor_thread_and_when_disabled():
     assert got == [] and dds == [b'm'], 'another thread (the sample loop) goes through DDS'
 
 
-def test_a_running_callback_is_not_entered_again():
+def test_a_running_callback_is_not_entered_again_the_message_waits_until_it_returns():
     bus = make_bus()
     got = []
 
     def cb(d):
-        got.append(d)
+        got.append(('in', d))
         if d == b'first':
-            bus.publish('/t', b'nested', lambda _: None)   # would re-enter cb: DDS path
+            bus.publish('/t', b'nested', lambda _: None)   # would re-enter cb: deferred
+        got.append(('out', d))
     sub = bus.subscribe('/t', cb)
     bus.publish('/t', b'first', lambda _: None)
-    assert got == [b'first']
-    sub.from_dds(b'nested')       # arrives through DDS, once
-    assert got == [b'first', b'nested']
+    assert got == [('in', b'first'), ('out', b'first'), ('in', b'nested'), ('out', b'nested')]
+    assert sub.deferred == 1 and not bus.deferred and not bus.busy and bus.depth == 0
+    sub.from_dds(b'nested')       # its DDS copy (if written) is dropped
+    assert len(got) == 4 and sub.duplicates == 1
+
+
+def test_a_busy_node_gets_the_messages_of_its_other_subscriptions_after_its_callback():
+    """The composed estimator: while its encoder callback publishes the state, the controller
+    of its process answers with a command; the estimator takes it after that callback, before
+    anything else, in publishing order; the controller's own subscription is not deferred."""
+    bus = make_bus()
+    est, order = object(), []
+
+    def controller(d):
+        order.append(('ctl', d))
+        bus.publish('/cmd', b'u' + d[1:], lambda _: order.append(('dds', b'u' + d[1:])))
+    bus.subscribe('/state', controller)
+    bus.subscribe('/cmd', lambda d: order.append(('est.cmd', d)), owner=est)
+
+    def on_encoders(d):
+        order.append(('est.enc', d))
+        bus.publish('/state', b's' + d[1:], lambda _: None)
+        order.append(('est.enc done', d))
+    bus.call(est, on_encoders, b'e1')
+    assert order == [('est.enc', b'e1'), ('ctl', b's1'), ('dds', b'u1'), ('est.enc done', b'e1'),
+                     ('est.cmd', b'u1')]
+    order.clear()
+    bus.publish('/cmd', b'u2', lambda _: None)   # est not busy: delivered at once
+    assert order == [('est.cmd', b'u2')]
+
+
+def test_deferred_messages_wait_for_the_next_call_when_the_callback_raised():
+    bus = make_bus()
+    owner, got = object(), []
+    bus.subscribe('/t', got.append, owner=owner)
+
+    def bad(_):
+        bus.publish('/t', b'm', lambda _: None)
+        raise RuntimeError('fault')
+    with pytest.raises(RuntimeError):
+        bus.call(owner, bad, b'x')
+    assert got == [] and list(bus.deferred) and not bus.busy and bus.depth == 0
+    bus.call(object(), lambda _: None, b'y')   # the next callback to return delivers it
+    assert got == [b'm'] and not bus.deferred
 
 
 def test_the_dds_write_happens_even_when_a_local_callback_raises():
