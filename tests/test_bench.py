@@ -59,3 +59,26 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
     # bags are deleted unless --keep-bags; logs stay
     assert not any(x.is_dir() for x in out.iterdir()), sorted(out.iterdir())
     assert list(out.glob('*.log'))
+
+
+@pytest.mark.timeout(150)
+def test_bench_composed_layouts_in_real_time_lose_nothing(tmp_path, ros_env):
+    """The composed layouts in real time (the only runs that exercise them there): in ``control``
+    the estimator takes the command of its controller through the in-process bus, deferred
+    until its own callback returns; in ``composed`` the simulator's sample loop hands the
+    sample to the estimator of its process (rwpend_ros.intra). Each answers its samples and
+    the recorder loses nothing."""
+    out = tmp_path / 'bench'
+    p = subprocess.run([RWPEND, 'bench', '--duration', '3', '--h', '0.001', '--no-lockstep', '--no-decode',
+                        '--layout', 'control', '--layout', 'composed', '-o', str(out)], env=ros_env,
+                       capture_output=True, text=True, timeout=140)
+    assert p.returncode == 0, f'{p.stdout[-3000:]}\n{p.stderr[-3000:]}'
+    res = json.loads((out / 'bench.json').read_text())
+    assert [r['layout'] for r in res['realtime']] == ['control', 'composed']
+    for rt in res['realtime']:
+        assert rt['samples'] > 1000, rt
+        assert all(c in (0, -2, 130) for c in rt['exit_codes'].values()), rt['exit_codes']
+        lost = {t: n for t, n in rt['dropped'].items() if not t.endswith('/command')}
+        assert lost and all(n == 0 for n in lost.values()), (rt['layout'], rt['dropped'])
+        # commands answer the samples (the latency is measured from the seq echo)
+        assert rt['latency_us']['p50'] is not None and rt['latency_us']['p50'] > 0, rt['latency_us']

@@ -115,8 +115,9 @@ class EstimatorNode(RwNode):
         # (rwpend_ros.hostbus). A command of a controller of this process comes through the
         # in-process bus: published while this node publishes the state it answers, it is
         # delivered right after that callback returns (rwpend_ros.intra: deferred), with no DDS
-        # copy. Encoders stay off the bus (a composed lockstep run would go on in one callback)
-        local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL, intra=False)
+        # copy. Encoders: from the sample loop of a simulator of this process (real time; in
+        # lockstep the simulator writes them to DDS, rwpend_sim.sim_node)
+        local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL)
         self.command_topic = local_subscription(self, MotorCommand, 'command', self.on_command_raw,
                                                 QOS_CONTROL).topic_name
         self.create_service(Trigger, '~/reset', self.on_reset)

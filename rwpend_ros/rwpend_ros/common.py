@@ -223,9 +223,11 @@ class LocalPublisher:
     rclpy publisher's (``get_subscription_count`` ...). ``publish`` may be called from another
     thread than the executor's (the simulator's sample loop)."""
 
-    def __init__(self, node, msg_type, topic: str, qos, host: bool = True) -> None:
+    def __init__(self, node, msg_type, topic: str, qos, host: bool = True, intra: bool = True) -> None:
         self.pub = node.create_publisher(msg_type, topic, qos)
         self.topic = self.pub.topic_name
+        #: to subscribers of this process through the in-process bus (False: through DDS)
+        self.intra = intra
         self.sender: hostbus.Sender | None = None
         self.dds_writes = 0     # messages written to DDS (the others went by the fast path only)
         if host and hostbus.enabled():
@@ -250,7 +252,7 @@ class LocalPublisher:
             self._seen, self._steady = count, 0
         else:
             self._steady += 1
-        settling = (len(self.sender.targets) + len(BUS.local(self.topic)) < count
+        settling = (len(self.sender.targets) + len(self._local()) < count
                     and self._steady * HOST_REFRESH_PERIOD < HOST_SETTLE_PERIOD)
         if (count == self._count and not self.sender.dropped and not settling
                 and self._ticks * HOST_REFRESH_PERIOD < HOST_RETRY_PERIOD):
@@ -280,14 +282,14 @@ class LocalPublisher:
         node on another host) keeps every message on DDS."""
         sender = self.sender
         if not isinstance(msg, (bytes, bytearray)):
-            if not (sender is not None and sender.targets) and not BUS.local(self.topic):
+            if not (sender is not None and sender.targets) and not self._local():
                 self.pub.publish(msg)
                 return
             from rclpy.serialization import serialize_message
             msg = serialize_message(msg)
         data = hostbus.pad4(bytes(msg))    # the bytes DDS delivers across processes
         if sender is not None and sender.targets:
-            local = BUS.local(self.topic)
+            local = self._local()
             fast_only = (not sender.fresh
                          and self.pub.get_subscription_count() == len(sender.targets) + len(local))
             # first: the other process starts while this one goes on
@@ -295,11 +297,17 @@ class LocalPublisher:
                 if local:
                     BUS.publish(self.topic, data, _no_dds_write)
                 return
-        BUS.publish(self.topic, data, self.pub.publish)
+        if self.intra:
+            BUS.publish(self.topic, data, self.pub.publish)
+        else:
+            self.pub.publish(data)
         self.dds_writes += 1
         if sender is not None:      # the marker of what follows: the last DDS write, whatever
             sender.marker = data    # the targets were
             sender.fresh = False
+
+    def _local(self) -> list:
+        return BUS.local(self.topic) if self.intra else []
 
     def __getattr__(self, name):
         if name == 'pub':           # not built (the publisher's creation failed)

@@ -62,6 +62,35 @@ def test_nothing_local_before_the_executor_runs(nodes):
     assert got == []                                 # DDS only (nobody spins here)
 
 
+def test_a_publisher_without_intra_leaves_the_bus_out(nodes):
+    """``LocalPublisher(intra=False)`` (the lockstep simulator's encoders): a subscriber of the
+    process gets the message through DDS, not inside ``publish()``."""
+    a, b = nodes
+    got = []
+    local_subscription(b, MotorCommand, 'command', got.append, QOS_CONTROL)
+    pub = LocalPublisher(a, MotorCommand, 'command', QOS_CONTROL_PUB, intra=False)
+    BUS.thread = threading.get_ident()
+    pub.publish(wire.pack_command(wire.pack_header(0, 0, 'rwpend'), 1, 0.5))
+    assert got == [] and pub.dds_writes == 1
+
+
+def test_a_node_busy_in_a_callback_gets_a_local_message_after_it(nodes):
+    """A subscriber of the process whose node has a callback running (here a timer-like call
+    of ``b``) gets the message when that callback has returned, on the same thread."""
+    a, b = nodes
+    got = []
+    local_subscription(b, MotorCommand, 'command', lambda d: got.append(('rx', d)), QOS_CONTROL)
+    pub = LocalPublisher(a, MotorCommand, 'command', QOS_CONTROL_PUB)
+    BUS.thread = threading.get_ident()
+    data = wire.pack_command(wire.pack_header(0, 0, 'rwpend'), 2, 0.25)
+
+    def b_callback():
+        pub.publish(data)                # e.g. b's state answered by a's command
+        got.append(('b done', None))
+    BUS.call(b, b_callback)
+    assert [g[0] for g in got] == ['b done', 'rx'] and wire.unpack_command(got[1][1]) == (2, 0.25)
+
+
 def test_a_bad_host_bus_setting_stops_the_process_before_rclpy(monkeypatch, capsys):
     from rwpend_ros.common import run_nodes
     monkeypatch.setenv('RWPEND_HOST_BUS', 'off')

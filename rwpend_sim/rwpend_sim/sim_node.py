@@ -33,6 +33,8 @@ from std_srvs.srv import SetBool
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState
 from rwpend_msgs.srv import Disturb
 from rwpend_ros import wire
+from rwpend_ros.hostbus import CALLBACK_LOCK
+from rwpend_ros.intra import BUS
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS,
                                RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN, ConfigError, LocalPublisher,
@@ -114,8 +116,13 @@ class SimNode(RwNode):
         self.stop = threading.Event()
         self.finished = False
 
-        # first to an estimator in another process of this host, then DDS (rwpend_ros.hostbus)
-        self.pub_enc = LocalPublisher(self, EncoderCounts, 'encoders', QOS_CONTROL_PUB)
+        # first to an estimator in another process of this host (rwpend_ros.hostbus), then to
+        # one in this process (real time: from the sample loop's thread, rwpend_ros.intra), then
+        # DDS. In lockstep an estimator of this process takes it by DDS: the sample goes out from
+        # on_command, inside the chain of callbacks the previous sample started, and through the
+        # bus every sample would be deferred from the one before (the run in one callback)
+        self.pub_enc = LocalPublisher(self, EncoderCounts, 'encoders', QOS_CONTROL_PUB,
+                                      intra=not self.lockstep)
         # true_state and /clock go to the recorder (and any other reader): LocalPublisher, so a
         # recorder on this host takes them through the fast path (no DDS write when it is the
         # only reader)
@@ -304,34 +311,58 @@ class SimNode(RwNode):
     def loop_realtime(self) -> None:
         """Sample k goes out at t0 + k h (absolute deadlines on the monotonic clock). The plant is
         integrated over [t_k, t_k+1) when command k arrives (:meth:`on_command`), or at t_k+1 with
-        the command held then if it did not: so at each instant only the publishing is left."""
+        the command held then if it did not: so at each instant only the publishing is left.
+
+        With an estimator in this process (``--composed``), this thread hands it the sample
+        through the in-process bus (rwpend_ros.intra), holding the callback lock as a callback
+        of this node: the estimator, the controller it hands the state to, and this node's
+        ``on_command`` (deferred until the sample is out) all run here, with no hand-over to the
+        executor's thread (PERFORMANCE.md, 18.)."""
         self.wait_for_loop(need_command=False)
         period_ns = int(round(self.h * 1e9))
         t0_ros = self.get_clock().now().nanoseconds
         t0 = time.monotonic_ns()
         k = 0
-        trace = self.trace
         early = int(self.p['wake_early_us']) * 1000
-        while not self.stop.is_set():
-            with self.lock:
-                if self.awaiting is not None:      # command k-1 not in time: the held one
-                    self.awaiting = None
-                    self._advance()
-                if self.done():
+        me = threading.get_ident()
+        BUS.extra_threads.add(me)
+        try:
+            while not self.stop.is_set():
+                stamp = t0_ros + k * period_ns
+                tick = t0 + k * period_ns
+                if self.pub_enc._local():        # an estimator of this process: as its callback
+                    with CALLBACK_LOCK:
+                        more = BUS.call(self, self._tick, stamp, tick)
+                else:
+                    more = self._tick(stamp, tick)
+                if not more:
                     break
-                if trace is not None:
-                    trace('sim.tick', self.core.k, t0 + k * period_ns)
-                self.publish_sample(t0_ros + k * period_ns)
-            k += 1
-            deadline = t0 + k * period_ns
-            delay = deadline - time.monotonic_ns()
-            if delay > early:
-                time.sleep((delay - early) / 1e9)
-            elif delay < -period_ns:
-                self.overruns += 1
-            while early and time.monotonic_ns() < deadline:
-                time.sleep(0)                      # yields the GIL (the executor thread runs)
+                k += 1
+                deadline = t0 + k * period_ns
+                delay = deadline - time.monotonic_ns()
+                if delay > early:
+                    time.sleep((delay - early) / 1e9)
+                elif delay < -period_ns:
+                    self.overruns += 1
+                while early and time.monotonic_ns() < deadline:
+                    time.sleep(0)                      # yields the GIL (the executor thread runs)
+        finally:
+            BUS.extra_threads.discard(me)
         self.finish()
+
+    def _tick(self, stamp_ns: int, tick_ns: int) -> bool:
+        """The sample instant: the held command if command k-1 did not come, then sample k;
+        False when the run is done."""
+        with self.lock:
+            if self.awaiting is not None:      # command k-1 not in time: the held one
+                self.awaiting = None
+                self._advance()
+            if self.done():
+                return False
+            if self.trace is not None:
+                self.trace('sim.tick', self.core.k, tick_ns)
+            self.publish_sample(stamp_ns)
+        return True
 
     def _step(self) -> None:
         """Lock held, command for the awaited sample in: integrate; lockstep: the next sample."""
