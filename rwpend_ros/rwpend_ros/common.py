@@ -77,16 +77,11 @@ def locked(callback, owner=None):
     if callback is None:
         return None
 
-    if owner is None:
-        def run(*args, **kwargs):
-            with CALLBACK_LOCK:
+    def run(*args, **kwargs):
+        with CALLBACK_LOCK:
+            if owner is None:
                 return callback(*args, **kwargs)
-    else:
-        call = BUS.call
-
-        def run(*args, **kwargs):
-            with CALLBACK_LOCK:
-                return call(owner, lambda: callback(*args, **kwargs))
+            return BUS.call(owner, callback, *args, **kwargs)
     run.__wrapped__ = callback
     return run
 
@@ -252,7 +247,7 @@ class LocalPublisher:
             self._seen, self._steady = count, 0
         else:
             self._steady += 1
-        settling = (len(self.sender.targets) + len(self._local()) < count
+        settling = (len(self.sender.targets) + len(self.local_subscribers()) < count
                     and self._steady * HOST_REFRESH_PERIOD < HOST_SETTLE_PERIOD)
         if (count == self._count and not self.sender.dropped and not settling
                 and self._ticks * HOST_REFRESH_PERIOD < HOST_RETRY_PERIOD):
@@ -282,14 +277,14 @@ class LocalPublisher:
         node on another host) keeps every message on DDS."""
         sender = self.sender
         if not isinstance(msg, (bytes, bytearray)):
-            if not (sender is not None and sender.targets) and not self._local():
+            if not (sender is not None and sender.targets) and not self.local_subscribers():
                 self.pub.publish(msg)
                 return
             from rclpy.serialization import serialize_message
             msg = serialize_message(msg)
         data = hostbus.pad4(bytes(msg))    # the bytes DDS delivers across processes
         if sender is not None and sender.targets:
-            local = self._local()
+            local = self.local_subscribers()
             fast_only = (not sender.fresh
                          and self.pub.get_subscription_count() == len(sender.targets) + len(local))
             # first: the other process starts while this one goes on
@@ -306,7 +301,9 @@ class LocalPublisher:
             sender.marker = data    # the targets were
             sender.fresh = False
 
-    def _local(self) -> list:
+    def local_subscribers(self) -> list:
+        """The subscribers of this process a publish from this thread reaches through the
+        in-process bus (none with ``intra=False``)."""
         return BUS.local(self.topic) if self.intra else []
 
     def __getattr__(self, name):

@@ -16,8 +16,9 @@ Rules (what keeps it safe):
 * only on the executor's thread (:attr:`LocalBus.thread`, set by ``run_nodes`` once the nodes
   are built; None = off) and on the receiving threads of the same-host fast path
   (:attr:`LocalBus.extra_threads`, :mod:`rwpend_ros.hostbus`; they hold the process's callback
-  lock): a publish from another thread (the simulator's real-time sample loop) goes through
-  DDS as before, so a node's callbacks still run one at a time;
+  lock; the simulator's real-time sample loop registers there and runs each tick holding it):
+  a publish from any other thread goes through DDS as before, so a node's callbacks still run
+  one at a time;
 * a subscriber whose node (its ``owner``) has a callback running already (on the stack,
   further up: :meth:`LocalBus.call` marks the node busy) is not entered again: the message is
   *deferred*, delivered on the same thread, holding the same lock, right after the outermost
@@ -32,10 +33,11 @@ Rules (what keeps it safe):
 * ``RWPEND_INTRA_PROCESS=0`` turns the bus off (for comparisons).
 
 Only topics whose subscriber opts in use it (``state`` -> controller, ``command`` -> simulator
-and estimator). ``encoders`` -> estimator stays out: in a composed lockstep run every sample
-would then be deferred from the one before (simulator -> estimator -> controller -> simulator),
-and the whole run would go on in one flush, the executor never getting its thread back. So a
-chain of local deliveries ends after one sample.
+and estimator, ``encoders`` -> estimator). The lockstep simulator's ``encoders`` publisher opts
+out (``LocalPublisher(intra=False)``): there every sample would be deferred from the one before
+(simulator -> estimator -> controller -> simulator), and the whole run would go on in one flush,
+the executor never getting its thread back. So a chain of local deliveries ends after one
+sample.
 """
 from __future__ import annotations
 
@@ -173,8 +175,8 @@ class LocalBus:
         else:
             sub.run(data)
 
-    def call(self, owner: Hashable, fn: Callable, *args):
-        """``fn(*args)`` as a callback of ``owner`` (its node): marked busy meanwhile, so a
+    def call(self, owner: Hashable, fn: Callable, *args, **kwargs):
+        """``fn(*args, **kwargs)`` as a callback of ``owner`` (its node): marked busy meanwhile, so a
         message for it published meanwhile waits; when the outermost such call returns, the
         messages deferred meanwhile are delivered, in order (and those they defer in turn).
         Called holding the process's callback lock. If ``fn`` raises, what was deferred waits
@@ -183,7 +185,7 @@ class LocalBus:
         busy[owner] = busy.get(owner, 0) + 1
         self.depth += 1
         try:
-            result = fn(*args)
+            result = fn(*args, **kwargs)
         finally:
             self.depth -= 1
             n = busy[owner] - 1

@@ -330,7 +330,7 @@ class SimNode(RwNode):
             while not self.stop.is_set():
                 stamp = t0_ros + k * period_ns
                 tick = t0 + k * period_ns
-                if self.pub_enc._local():        # an estimator of this process: as its callback
+                if self.pub_enc.local_subscribers():   # an estimator of this process: as its callback
                     with CALLBACK_LOCK:
                         more = BUS.call(self, self._tick, stamp, tick)
                 else:
