@@ -52,7 +52,7 @@ from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher,
                                RwNode, declare_rig, diagnostic_status, fast_path_values, local_subscription,
-                               run_node, sample_time)
+                               SlackTimer, run_node, sample_time)
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
 
@@ -146,7 +146,8 @@ class ControllerNode(RwNode):
                                       history=QOS_CONTROL_LATEST.history, depth=depth,
                                       durability=QOS_CONTROL_LATEST.durability))
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
-        self.create_timer(1.0, self.publish_diagnostics)
+        # in the loop's slack: after the command of a sample, not while a state waits (19.)
+        self.diag_timer = SlackTimer(self, 1.0, self.publish_diagnostics)
         self.create_timer(0.05, self._do_sync)
         # steady clock: fires while sim time stands still too (a stale state in lockstep shows
         # as sim time moving on without states; judged on the node's clock in _check_stale)
@@ -318,6 +319,7 @@ class ControllerNode(RwNode):
             self.trace('ctl.pub', seq)
         self.pub_cmd.publish(wire.pack_command(header, seq, u))
         self.samples += 1
+        self.diag_timer.sample_done()
         self._since_status += 1
         self.last_status = st
         fault_kind = st.fault.split(':', 1)[0]

@@ -32,7 +32,7 @@ from rwpend_msgs.msg import EncoderCounts, MotorCommand
 from rwpend_ros import wire
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, LocalPublisher,
                                LockedCallbacks, declare_rig, diagnostic_status, fast_path_values, local_subscription,
-                               locked, run_node)
+                               SlackTimer, locked, run_node)
 
 from .link import DriverLink, LinkConfig
 
@@ -97,7 +97,8 @@ class DriverNode(LockedCallbacks, LifecycleNode):
         local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL)
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
-        self.create_timer(p['diagnostics_period'], self.publish_diagnostics)
+        # in the loop's slack: after a command is written, not while one waits (PERFORMANCE.md 19.)
+        self.diag_timer = SlackTimer(self, p['diagnostics_period'], self.publish_diagnostics)
         self.autostart_timer = None
         if p['autostart']:
             self.autostart_timer = self.create_timer(0.01, self.autostart)
@@ -230,6 +231,7 @@ class DriverNode(LockedCallbacks, LifecycleNode):
             self.malformed_commands += 1
             return
         self.command(seq, u)
+        self.diag_timer.sample_done()
 
     def command(self, seq: int, u: float) -> None:
         link = self.link

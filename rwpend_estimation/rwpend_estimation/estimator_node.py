@@ -33,7 +33,7 @@ from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher, RwNode,
                                declare_rig, diagnostic_status, fast_path_values, local_subscription, run_node,
-                               sample_time)
+                               SlackTimer, sample_time)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
                                           make_estimator, switch_estimator)
 
@@ -121,7 +121,8 @@ class EstimatorNode(RwNode):
         self.command_topic = local_subscription(self, MotorCommand, 'command', self.on_command_raw,
                                                 QOS_CONTROL).topic_name
         self.create_service(Trigger, '~/reset', self.on_reset)
-        self.create_timer(float(period), self.publish_diagnostics)
+        # in the loop's slack: after the state of a sample, not while a sample waits (19.)
+        self.diag_timer = SlackTimer(self, float(period), self.publish_diagnostics)
 
         self.trace = tracer('estimator')      # None unless RWPEND_TRACE is set (profiling)
         self.state_packer = wire.StatePacker(self.config.estimator)
@@ -265,6 +266,7 @@ class EstimatorNode(RwNode):
         if self.publish_joint_states:
             self.pub_joints.publish(self.joint_packer.pack(
                 msg.header, e.theta, e.wheel_angle - e.theta, e.theta_dot, e.wheel_rate - e.theta_dot))
+        self.diag_timer.sample_done()
 
     def on_reset(self, req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         self.est.reset()

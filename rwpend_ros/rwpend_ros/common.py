@@ -113,6 +113,44 @@ class LockedCallbacks:
         return super().add_post_set_parameters_callback(locked(callback, self))
 
 
+class SlackTimer:
+    """A periodic timer of a loop node whose work must not delay a sample (diagnostics: 0.35-0.6
+    ms of CPU holding the callback lock and the GIL on the project's machine, measured:
+    PERFORMANCE.md, 19.). While the loop runs (:meth:`sample_done` was called since the last
+    tick) the tick only marks the work due, and the next per-sample callback hands it to
+    :meth:`rwpend_ros.intra.LocalBus.after`: it runs right after that callback (in a composed
+    process, after the sample's chain), in the slack of the period. When no sample came since
+    the last tick the work runs at the tick, as a plain timer's would; so it never waits
+    longer than one period more than the timer alone. Events that must be reported at once
+    (an e-stop, a stale state) do not go through it."""
+
+    def __init__(self, node, period: float, fn: Callable[[], None]) -> None:
+        self.fn = fn
+        self.samples = 0         # per-sample callbacks that reported (sample_done)
+        self._seen = 0           # ... as of the last tick
+        self.due = False
+        self.in_slack = 0        # runs in the loop's slack
+        self.at_tick = 0         # runs at the tick (no loop running)
+        node.create_timer(period, self._tick)
+
+    def _tick(self) -> None:
+        if self.samples != self._seen:
+            self._seen = self.samples
+            self.due = True
+        else:
+            self.due = False
+            self.at_tick += 1
+            self.fn()
+
+    def sample_done(self) -> None:
+        """Called at the end of the node's per-sample callback (holding the callback lock)."""
+        self.samples += 1
+        if self.due:
+            self.due = False
+            self.in_slack += 1
+            BUS.after(self.fn)
+
+
 class RwNode(LockedCallbacks, Node):
     """rclpy Node with :class:`LockedCallbacks` (the simulator, estimator and controller)."""
 
@@ -249,8 +287,12 @@ class LocalPublisher:
             self._steady += 1
         settling = (len(self.sender.targets) + len(self.local_subscribers()) < count
                     and self._steady * HOST_REFRESH_PERIOD < HOST_SETTLE_PERIOD)
+        # every HOST_RETRY_PERIOD s the graph is read again only while a subscriber is not
+        # reached directly (one absent at the last reading may have come since): a reading
+        # holds the lock and the GIL for 0.02-0.56 ms (PERFORMANCE.md, 19.)
+        missing = len(self.sender.targets) + len(self.local_subscribers()) < count
         if (count == self._count and not self.sender.dropped and not settling
-                and self._ticks * HOST_REFRESH_PERIOD < HOST_RETRY_PERIOD):
+                and (not missing or self._ticks * HOST_REFRESH_PERIOD < HOST_RETRY_PERIOD)):
             return
         try:
             infos = self._node.get_subscriptions_info_by_topic(self.topic)

@@ -114,6 +114,9 @@ class LocalBus:
         self.depth = 0
         #: messages for busy owners, delivered when the outermost callback returns
         self.deferred: deque[tuple[_LocalSub, bytes]] = deque()
+        #: work for the loop's slack (:meth:`after`): one job each time an outermost callback returns
+        self.slack: deque[Callable[[], None]] = deque()
+        self.slack_jobs = 0      # jobs run in the slack
 
     def subscribe(self, topic: str, callback: Callable[[bytes], None], before_dds: bool = True,
                   owner: Hashable = None) -> _LocalSub:
@@ -193,9 +196,37 @@ class LocalBus:
                 busy[owner] = n
             else:
                 del busy[owner]
-        if not self.depth and self.deferred:
-            self._flush()
+        if not self.depth:
+            if self.deferred:
+                self._flush()
+            if self.slack:
+                self._run_slack()
         return result
+
+    def after(self, fn: Callable[[], None]) -> None:
+        """Run ``fn()`` when the outermost callback running now returns (after the messages it
+        deferred), on the same thread, holding the same lock -- now if no callback runs through
+        :meth:`call`. Called from a node's per-sample callback for work that must not run while
+        a sample is on its way (diagnostics, :class:`rwpend_ros.common.SlackTimer`): in
+        separate processes that is right after the callback; in a composed process, after the
+        whole chain of one sample (estimator, controller, the simulator's command). One job
+        runs per outermost return, so the jobs of several nodes that fall due together go in
+        successive samples; a job already waiting is not queued twice."""
+        if not self.depth:
+            fn()
+        elif fn not in self.slack:
+            self.slack.append(fn)
+
+    def _run_slack(self) -> None:
+        fn = self.slack.popleft()
+        self.slack_jobs += 1
+        self.depth += 1          # calls inside the job defer / flush as inside a callback
+        try:
+            fn()
+        finally:
+            self.depth -= 1
+        if self.deferred:
+            self._flush()
 
     def _flush(self) -> None:
         deferred = self.deferred
@@ -214,6 +245,7 @@ class LocalBus:
         self.topics.clear()
         self.busy.clear()
         self.deferred.clear()
+        self.slack.clear()
         self.depth = 0
 
 

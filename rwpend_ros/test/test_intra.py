@@ -161,3 +161,54 @@ def test_after_dds_subscriber_gets_the_dds_copy_when_a_callback_raised():
         bus.publish('/t', b'm', lambda d: None)
     late.from_dds(b'm')           # not delivered locally: its DDS copy is not dropped
     assert got == [b'm']
+
+
+def test_slack_work_runs_after_the_outermost_callback_and_its_deferred_messages():
+    """LocalBus.after: the job waits for the whole chain of one sample (composed: the estimator
+    and the controller nested in the simulator's tick, the command deferred to its end)."""
+    bus = make_bus()
+    order = []
+    sim, est = object(), object()
+    bus.subscribe('/r/command', lambda d: order.append(('sim.command', d)), owner=sim)
+
+    def est_callback():
+        order.append('est')
+        bus.after(lambda: order.append('est.diagnostics'))
+        bus.publish('/r/command', b'u', lambda d: order.append(('dds', d)))   # sim busy: deferred
+        order.append('est.end')
+
+    bus.call(sim, lambda: bus.call(est, est_callback))
+    assert order == ['est', ('dds', b'u'), 'est.end', ('sim.command', b'u'), 'est.diagnostics']
+    assert bus.slack_jobs == 1 and not bus.slack
+
+
+def test_slack_work_runs_now_outside_a_callback_one_job_per_return_and_never_twice():
+    bus = make_bus()
+    order = []
+    bus.after(lambda: order.append('now'))
+    assert order == ['now'] and bus.slack_jobs == 0
+    a, b = (lambda: order.append('a')), (lambda: order.append('b'))
+
+    def queue():
+        bus.after(a)
+        bus.after(a)           # already waiting: not twice
+        bus.after(b)
+    bus.call('n', queue)
+    assert order == ['now', 'a']               # one job per outermost return
+    bus.call('n', lambda: None)
+    assert order == ['now', 'a', 'b'] and not bus.slack
+    bus.call('n', lambda: None)
+    assert order == ['now', 'a', 'b']
+
+
+def test_a_slack_job_that_raises_propagates_and_the_bus_stays_usable():
+    bus = make_bus()
+
+    def boom():
+        raise RuntimeError('diagnostics failed')
+    with pytest.raises(RuntimeError, match='diagnostics failed'):
+        bus.call('n', lambda: bus.after(boom))
+    assert bus.depth == 0 and not bus.busy and not bus.slack
+    seen = []
+    bus.call('n', lambda: seen.append(1))
+    assert seen == [1]

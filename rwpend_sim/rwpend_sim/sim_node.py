@@ -39,7 +39,7 @@ from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS,
                                RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN, ConfigError, LocalPublisher,
                                RwNode, declare_rig, diagnostic_status, fast_path_values,
-                               local_subscription, run_node)
+                               SlackTimer, local_subscription, run_node)
 from rwpend_sim.sim_core import SimCore
 
 PARAMS = {
@@ -137,7 +137,8 @@ class SimNode(RwNode):
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
-        self.create_timer(p['diagnostics_period'], self.publish_diagnostics)
+        # in the loop's slack: after a command is applied, not while a command waits (19.)
+        self.diag_timer = SlackTimer(self, p['diagnostics_period'], self.publish_diagnostics)
         #: lockstep: samples this simulator may run ahead of the recorder (0: it does not wait)
         self.recorder_window = int(window) if self.lockstep else 0
         self.recorder_k = -1            # the newest sample the recorder reported (its /clock)
@@ -188,6 +189,7 @@ class SimNode(RwNode):
             ok, _ = self.core.command(seq, u)
             if ok and self.awaiting is not None and self.core.u_seq >= self.awaiting:
                 self._step()
+        self.diag_timer.sample_done()
 
     def on_recorder_progress(self, data: bytes) -> None:
         """The recorder's progress (the newest ``/clock`` it took, wire bytes): a sample held
