@@ -51,7 +51,7 @@ from rwpend_msgs.srv import SetMode
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher,
-                               RwNode, declare_rig, diagnostic_status, fast_path_values, local_subscription,
+                               RwNode, declare_rig, diagnostic_status, fast_path_values, publish_diagnostic, local_subscription,
                                SlackTimer, run_node, sample_time)
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
@@ -404,9 +404,8 @@ class ControllerNode(RwNode):
                 f'out-of-order states; {wd.episodes} stale episodes')
         else:
             level, message = DiagnosticStatus.OK, f'{ctrl.mode}/{ctrl.law}'
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [diagnostic_status(
+        publish_diagnostic(
+            self.pub_diag, self.get_clock().now().nanoseconds,
             f'{self.get_namespace().rstrip("/")}/controller', 'rwpend', level, message, {
                 'mode': self.ctrl.mode, 'law': self.ctrl.law, 'samples': self.samples,
                 'switch_count': self.ctrl.switch_count, 'reason': self.ctrl.reason,
@@ -419,8 +418,7 @@ class ControllerNode(RwNode):
                 'malformed_states': self.malformed_states,
                 'friction_compensation': self.ctrl.config.friction_compensation,
                 **fast_path_values(self),
-            })]
-        self.pub_diag.publish(arr)
+            })
 
 
 def main(args=None) -> int:

@@ -31,7 +31,7 @@ from std_srvs.srv import SetBool
 from rwpend_msgs.msg import EncoderCounts, MotorCommand
 from rwpend_ros import wire
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, LocalPublisher,
-                               LockedCallbacks, declare_rig, diagnostic_status, fast_path_values, local_subscription,
+                               LockedCallbacks, declare_rig, diagnostic_status, fast_path_values, publish_diagnostic, local_subscription,
                                SlackTimer, locked, run_node)
 
 from .link import DriverLink, LinkConfig
@@ -295,12 +295,10 @@ class DriverNode(LockedCallbacks, LifecycleNode):
                 level, msg = DiagnosticStatus.OK, 'active'
             else:
                 level, msg = DiagnosticStatus.OK, 'connected, inactive (torque off)'
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status.append(diagnostic_status(f'{self.get_namespace().rstrip("/")}/driver: serial link',
-                                            self.cfg.port, level, msg, values))
         try:
-            self.pub_diag.publish(arr)
+            publish_diagnostic(self.pub_diag, self.get_clock().now().nanoseconds,
+                               f'{self.get_namespace().rstrip("/")}/driver: serial link', self.cfg.port,
+                               level, msg, values)
         except Exception:  # noqa: BLE001 - context shutting down
             pass
 

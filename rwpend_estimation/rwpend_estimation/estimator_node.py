@@ -32,7 +32,7 @@ from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher, RwNode,
-                               declare_rig, diagnostic_status, fast_path_values, local_subscription, run_node,
+                               declare_rig, diagnostic_status, fast_path_values, publish_diagnostic, local_subscription, run_node,
                                SlackTimer, sample_time)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
                                           make_estimator, switch_estimator)
@@ -284,9 +284,8 @@ class EstimatorNode(RwNode):
             message = f'{self.config.estimator}: {self.last_error}'
         if self.samples == 0:
             level, message = DiagnosticStatus.STALE, 'no encoder sample yet'
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status = [diagnostic_status(
+        publish_diagnostic(
+            self.pub_diag, self.get_clock().now().nanoseconds,
             f'{self.get_namespace().rstrip("/")}/estimator', 'rwpend', level, message, {
                 'estimator': self.config.estimator,
                 'friction_source': self.config.friction_source,
@@ -297,8 +296,7 @@ class EstimatorNode(RwNode):
                 'deferred_samples': self.deferred,
                 'switches': self.switches,
                 **fast_path_values(self),
-            })]
-        self.pub_diag.publish(arr)
+            })
 
 
 class Sample:

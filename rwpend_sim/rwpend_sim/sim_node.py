@@ -38,7 +38,7 @@ from rwpend_ros.intra import BUS
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS,
                                RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN, ConfigError, LocalPublisher,
-                               RwNode, declare_rig, diagnostic_status, fast_path_values,
+                               RwNode, declare_rig, diagnostic_status, fast_path_values, publish_diagnostic,
                                SlackTimer, local_subscription, run_node)
 from rwpend_sim.sim_core import SimCore
 
@@ -476,11 +476,9 @@ class SimNode(RwNode):
                if self.p['lockstep_recorder_window'] and self.lockstep else {}),
             **fast_path_values(self),
         }
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        arr.status.append(diagnostic_status(f'{self.get_namespace().rstrip("/")}/sim: plant',
-                                            self.get_namespace(), level, msg, values))
-        self.pub_diag.publish(arr)
+        publish_diagnostic(self.pub_diag, self.get_clock().now().nanoseconds,
+                           f'{self.get_namespace().rstrip("/")}/sim: plant', self.get_namespace(), level, msg,
+                           values)
 
     def close(self) -> None:
         self.stop.set()
