@@ -64,6 +64,14 @@ from .launch import Launcher
 DEFAULT_PERIODS = (0.001, 0.0005)
 #: bench layouts -> ./rwpend up arguments
 LAYOUT_ARGS = {'separate': [], 'control': ['--composed', 'control'], 'composed': ['--composed', 'all']}
+#: the processes of each layout's real-time run (its --record included)
+LAYOUT_PROCESSES = {'separate': ('sim', 'estimator', 'controller', 'recorder'),
+                    'control': ('sim', 'control', 'recorder'), 'composed': ('stack', 'recorder')}
+#: ``--pin`` of the real-time runs by default (2 CPUs or more): separate processes only, the
+#: simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free. Measured
+#: (PERFORMANCE.md, 20.): lower median and p99 latency in every interleaved pair; no gain for
+#: the control layout; lockstep not pinned (see there)
+DEFAULT_PINS = {'separate': ('sim=0', 'estimator=0', 'controller=1')}
 SETTLE_S = 4.0            # wall seconds after start before the measured window opens
 #: a lockstep run is stopped after this many wall seconds per simulated second (plus
 #: SETTLE_S + 30): the slowest ever measured ran at ~1x; once, a run froze with Fast DDS's async
@@ -207,6 +215,25 @@ def _loadavg() -> list[float] | None:
 
 
 # ------------------------------------------------------------------ running the stack
+def realtime_pins(pin: list[str] | None, layouts) -> dict[str, tuple[str, ...]]:
+    """The ``--pin`` items of each layout's real-time runs: the defaults (:data:`DEFAULT_PINS`,
+    on 2 CPUs or more) when ``pin`` is None, nothing for ``['none']``; else those items whose
+    process the layout runs. ValueError for a process no layout of the run has, or a bad item."""
+    from .cli import parse_pins
+    if pin is None:
+        return dict(DEFAULT_PINS) if (os.cpu_count() or 1) >= 2 else {}
+    if [v.strip().lower() for v in pin] == ['none']:
+        return {}
+    every = sorted({p for x in layouts for p in LAYOUT_PROCESSES[x]})
+    parsed = parse_pins(pin, every)              # the reason for a bad item
+    out = {}
+    for x in layouts:
+        mine = tuple(f'{k}={v}' for k, v in parsed.items() if k in LAYOUT_PROCESSES[x])
+        if mine:
+            out[x] = mine
+    return out
+
+
 def _stack(up_args: list[str]):
     """(parsed args, specs, params files) of ``./rwpend up UP_ARGS`` (cli.build_stack)."""
     from .cli import Parser, add_stack_args, build_stack
@@ -555,7 +582,8 @@ def summary_text(res: dict) -> str:
              f"settings: rt priority {st.get('rt_priority')}, CPU wake-up latency request "
              f"{'none' if st.get('cpu_latency_us') is None else str(st['cpu_latency_us']) + ' us'}, "
              f"{st['duration_s']:g} s real time, "
-             f"{st['lockstep_duration_s']:g} s lockstep"]
+             f"{st['lockstep_duration_s']:g} s lockstep"
+             + ''.join(f"; {x} pinned {' '.join(v)}" for x, v in (st.get('pin_realtime') or {}).items())]
     if res['realtime']:
         lines.append('real time (recorder running). latency = sample instant -> command at the recorder '
                      '(us); late = command k after sample k+1')
@@ -648,6 +676,11 @@ def _parser() -> argparse.ArgumentParser:
                    help='./rwpend up --set of the runs (repeatable), e.g. sim.wake_early_us=100')
     p.add_argument('--cpus', default=None, metavar='LOOP[:RECORDER]',
                    help='./rwpend up --cpus of the runs (CPU affinity), e.g. 1:0')
+    p.add_argument('--pin', action='append', default=None, metavar='PROCESS=CPUS|none',
+                   help='./rwpend up --pin of the real-time runs (repeatable; each run takes those '
+                   'of its processes). Default: separate processes --pin sim=0 --pin estimator=0 '
+                   '--pin controller=1 on a machine of 2 CPUs or more, the other layouts none; '
+                   'none = no pinning')
     p.add_argument('--cpu-latency', default='0', metavar='US|none',
                    help='./rwpend up --cpu-latency of the runs (PM QoS CPU wake-up latency; '
                    'default 0: idle CPUs poll while a run lasts; none = no request)')
@@ -693,6 +726,7 @@ def main(argv=None) -> int:
         up_extra += ['--cpu-latency', str(cpu_latency)]
     try:
         _stack(up_extra)      # refuse bad --set / --cpus before any run
+        pins = realtime_pins(a.pin, layouts)
     except (ValueError, SystemExit) as exc:
         if not isinstance(exc, SystemExit):
             print(f'rwpend bench: error: {exc}', file=sys.stderr)
@@ -701,7 +735,7 @@ def main(argv=None) -> int:
            'settings': {'duration_s': duration, 'lockstep_duration_s': ls_dur, 'periods_s': list(periods),
                         'layouts': list(layouts), 'domain_id': int(env['ROS_DOMAIN_ID']),
                         'namespace': a.ns, 'quick': a.quick, 'rt_priority': a.rt_priority,
-                        'set': list(a.set), 'cpus': a.cpus,
+                        'set': list(a.set), 'cpus': a.cpus, 'pin_realtime': {k: list(v) for k, v in pins.items()},
                         'cpu_latency_us': None if cpu_latency is None else int(cpu_latency),
                         'command': 'rwpend bench ' + ' '.join(sys.argv[1:] if argv is None else argv)},
            'realtime': [], 'lockstep': [], 'decode': None}
@@ -711,7 +745,8 @@ def main(argv=None) -> int:
             for layout in layouts:
                 for h in periods:
                     say(f'rwpend bench: real time, {layout}, h = {h * 1e3:g} ms, {duration:g} s ...')
-                    r = run_realtime(out, h, duration, layout, env, a.ns, echo, up_extra=up_extra)
+                    r = run_realtime(out, h, duration, layout, env, a.ns, echo,
+                                     up_extra=[*up_extra, *(x for v in pins.get(layout, ()) for x in ('--pin', v))])
                     res['realtime'].append(r)
         if not a.no_lockstep:
             for layout in layouts:

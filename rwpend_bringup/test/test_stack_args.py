@@ -82,3 +82,39 @@ def test_bad_environment_switch_refused_before_anything_starts(monkeypatch, name
     monkeypatch.setenv(name, bad)
     with pytest.raises(ValueError, match=name):
         specs_of('--record', '/tmp/x')
+
+
+def test_pin_sets_one_process_and_overrides_cpus():
+    s = specs_of('--record', '/tmp/x', '--cpus', '0,1', '--pin', 'sim=0', '--pin', 'controller=1',
+                 '--pin', 'recorder=0,1')
+    assert s['sim'].env['RWPEND_CPUS'] == '0' and s['controller'].env['RWPEND_CPUS'] == '1'
+    assert s['estimator'].env['RWPEND_CPUS'] == '0,1' and s['recorder'].env['RWPEND_CPUS'] == '0,1'
+    c = specs_of('--composed', 'control', '--pin', 'control=0')
+    assert c['control'].env['RWPEND_CPUS'] == '0' and 'RWPEND_CPUS' not in c['sim'].env
+
+
+@pytest.mark.parametrize('bad, reason', [
+    ('sim', 'PROCESS=CPUS'), ('=0', 'PROCESS=CPUS'), ('sim=', 'PROCESS=CPUS'),
+    ('recorder=0', "no process 'recorder'"), ('stack=0', "no process 'stack'"),
+    (f'sim={os.cpu_count() or 1}', 'CPU numbers'), ('sim=0,,1', 'CPU numbers'), ('sim=a', 'CPU numbers')])
+def test_bad_pin_refused_with_the_reason(bad, reason):
+    with pytest.raises(ValueError, match=reason):
+        specs_of('--pin', bad)
+
+
+def test_pin_twice_refused():
+    with pytest.raises(ValueError, match='twice'):
+        specs_of('--pin', 'sim=0', '--pin', 'sim=1')
+
+
+def test_bench_pins_of_the_real_time_runs(monkeypatch):
+    from rwpend_bringup import bench
+    monkeypatch.setattr(os, 'cpu_count', lambda: 2)
+    assert bench.realtime_pins(None, ['separate', 'control']) == {'separate': ('sim=0', 'estimator=0', 'controller=1')}
+    assert bench.realtime_pins(['none'], ['separate']) == {}
+    assert bench.realtime_pins(['sim=1', 'stack=0'], ['separate', 'control', 'composed']) == {
+        'separate': ('sim=1',), 'control': ('sim=1',), 'composed': ('stack=0',)}
+    with pytest.raises(ValueError, match="no process 'stack'"):
+        bench.realtime_pins(['stack=0'], ['separate'])
+    monkeypatch.setattr(os, 'cpu_count', lambda: 1)
+    assert bench.realtime_pins(None, ['separate']) == {}

@@ -41,8 +41,16 @@ def apply_scheduling(environ: Mapping[str, str] | None = None) -> dict:
     cpus = env.get('RWPEND_CPUS', '').strip()
     if cpus:
         try:
-            os.sched_setaffinity(0, {int(c) for c in cpus.split(',') if c.strip()})
+            ids = {int(c) for c in cpus.split(',') if c.strip()}
+            os.sched_setaffinity(0, ids)
             done['cpus'] = sorted(os.sched_getaffinity(0))
+            # threads started before this call (numpy's BLAS workers, at import) too: the
+            # threads started later inherit it
+            for tid in os.listdir('/proc/self/task') if os.path.isdir('/proc/self/task') else ():
+                try:
+                    os.sched_setaffinity(int(tid), ids)
+                except OSError:
+                    pass
         except (OSError, ValueError, AttributeError) as exc:
             done['cpus'] = f'not permitted ({exc})'
     return done

@@ -46,3 +46,29 @@ def test_no_option_no_request():
     from rwpend_ros.sched import request_cpu_latency
     with request_cpu_latency(None) as req:
         assert req.us is None and not req.active and req.status == 'none'
+
+
+def test_cpu_affinity_reaches_the_threads_started_before(tmp_path):
+    """RWPEND_CPUS pins every thread of the process: those started before apply_scheduling
+    (numpy's BLAS workers start at import) and those after (DDS's). In a child process: the
+    test's own affinity is left alone."""
+    import subprocess
+    import textwrap
+    code = textwrap.dedent('''
+        import os, threading, time
+        from rwpend_ros.sched import apply_scheduling
+        ev = threading.Event()
+        before = threading.Thread(target=ev.wait, daemon=True)
+        before.start()
+        done = apply_scheduling({'RWPEND_CPUS': '0'})
+        after = threading.Thread(target=ev.wait, daemon=True)
+        after.start()
+        time.sleep(0.05)
+        sets = {tid: sorted(os.sched_getaffinity(int(tid))) for tid in os.listdir('/proc/self/task')}
+        print(done['cpus'], len(sets), all(v == [0] for v in sets.values()))
+        ev.set()
+    ''')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    cpus, n, pinned = out.stdout.rsplit(' ', 2)
+    assert cpus == '[0]' and int(n) >= 3 and pinned.strip() == 'True', out.stdout
