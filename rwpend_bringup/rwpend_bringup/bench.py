@@ -67,7 +67,7 @@ LAYOUT_ARGS = {'separate': [], 'control': ['--composed', 'control'], 'composed':
 #: the processes of each layout's real-time run (its --record included)
 LAYOUT_PROCESSES = {'separate': ('sim', 'estimator', 'controller', 'recorder'),
                     'control': ('sim', 'control', 'recorder'), 'composed': ('stack', 'recorder')}
-#: ``--pin`` of the real-time runs by default (2 CPUs or more): separate processes only, the
+#: ``--pin`` of the real-time runs by default (when CPUs 0 and 1 are usable): separate processes only, the
 #: simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free. Measured
 #: (PERFORMANCE.md, 20.): lower median and p99 latency in every interleaved pair; no gain for
 #: the control layout; lockstep not pinned (see there)
@@ -217,11 +217,11 @@ def _loadavg() -> list[float] | None:
 # ------------------------------------------------------------------ running the stack
 def realtime_pins(pin: list[str] | None, layouts) -> dict[str, tuple[str, ...]]:
     """The ``--pin`` items of each layout's real-time runs: the defaults (:data:`DEFAULT_PINS`,
-    on 2 CPUs or more) when ``pin`` is None, nothing for ``['none']``; else those items whose
+    when CPUs 0 and 1 are usable) when ``pin`` is None, nothing for ``['none']``; else those items whose
     process the layout runs. ValueError for a process no layout of the run has, or a bad item."""
-    from .cli import parse_pins
+    from .cli import parse_pins, usable_cpus
     if pin is None:
-        return dict(DEFAULT_PINS) if (os.cpu_count() or 1) >= 2 else {}
+        return dict(DEFAULT_PINS) if {0, 1} <= usable_cpus() else {}
     if [v.strip().lower() for v in pin] == ['none']:
         return {}
     every = sorted({p for x in layouts for p in LAYOUT_PROCESSES[x]})
@@ -679,7 +679,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--pin', action='append', default=None, metavar='PROCESS=CPUS|none',
                    help='./rwpend up --pin of the real-time runs (repeatable; each run takes those '
                    'of its processes). Default: separate processes --pin sim=0 --pin estimator=0 '
-                   '--pin controller=1 on a machine of 2 CPUs or more, the other layouts none; '
+                   '--pin controller=1 when CPUs 0 and 1 are usable, the other layouts none; '
                    'none = no pinning')
     p.add_argument('--cpu-latency', default='0', metavar='US|none',
                    help='./rwpend up --cpu-latency of the runs (PM QoS CPU wake-up latency; '

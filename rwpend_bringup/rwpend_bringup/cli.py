@@ -150,7 +150,7 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='CPU affinity of one process of the stack (repeatable; overrides --cpus for '
                    'it): sim, driver, estimator, controller, control (--composed control), stack '
                    '(--composed) or recorder, on the CPUs CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
-                   '--pin sim=0 --pin estimator=0 --pin controller=1 took 13-52 us off the median '
+                   '--pin sim=0 --pin estimator=0 --pin controller=1 took 12-52 us off the median '
                    'loop latency of separate processes (PERFORMANCE.md, 20.)')
     p.add_argument('--composed', nargs='?', const='all', default=None, choices=COMPOSITIONS,
                    help='nodes in one process on one executor: "all" (the default of a bare '
@@ -160,10 +160,19 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    'of its own; see PERFORMANCE.md')
 
 
+def usable_cpus() -> set[int]:
+    """The CPUs this process may run on (its affinity: a container or a cgroup may allow fewer
+    than the machine has)."""
+    try:
+        return set(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return set(range(os.cpu_count() or 1))
+
+
 def parse_pins(pins: list[str], processes: list[str]) -> dict[str, str]:
     """``--pin PROCESS=CPUS`` items -> {process: 'cpu,cpu'}; ValueError with the reason for a
-    process this stack does not run, a CPU this machine does not have, or a bad item."""
-    n = os.cpu_count() or 1
+    process this stack does not run, a CPU it may not use (:func:`usable_cpus`), or a bad item."""
+    usable = usable_cpus()
     out: dict[str, str] = {}
     for item in pins:
         name, sep, cpus = item.partition('=')
@@ -173,8 +182,11 @@ def parse_pins(pins: list[str], processes: list[str]) -> dict[str, str]:
         if name not in processes:
             raise ValueError(f'--pin: no process {name!r} in this stack (its processes: '
                              f'{", ".join(processes)})')
-        if not all(c.isdigit() and int(c) < n for c in ids):
-            raise ValueError(f'--pin: CPU numbers 0..{n - 1} separated by commas, got {item!r}')
+        if not all(c.isdigit() for c in ids):
+            raise ValueError(f'--pin: CPU numbers separated by commas, got {item!r}')
+        if not {int(c) for c in ids} <= usable:
+            raise ValueError(f'--pin: {item!r}: this process may use CPUs '
+                             f'{",".join(map(str, sorted(usable)))} only')
         if name in out:
             raise ValueError(f'--pin: {name} given twice')
         out[name] = ','.join(str(int(c)) for c in ids)

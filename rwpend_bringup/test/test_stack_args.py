@@ -96,7 +96,8 @@ def test_pin_sets_one_process_and_overrides_cpus():
 @pytest.mark.parametrize('bad, reason', [
     ('sim', 'PROCESS=CPUS'), ('=0', 'PROCESS=CPUS'), ('sim=', 'PROCESS=CPUS'),
     ('recorder=0', "no process 'recorder'"), ('stack=0', "no process 'stack'"),
-    (f'sim={os.cpu_count() or 1}', 'CPU numbers'), ('sim=0,,1', 'CPU numbers'), ('sim=a', 'CPU numbers')])
+    (f'sim={os.cpu_count() or 1}', 'may use CPUs'), ('sim=0,,1', 'CPU numbers'), ('sim=a', 'CPU numbers'),
+    ('sim=-1', 'CPU numbers')])
 def test_bad_pin_refused_with_the_reason(bad, reason):
     with pytest.raises(ValueError, match=reason):
         specs_of('--pin', bad)
@@ -107,14 +108,24 @@ def test_pin_twice_refused():
         specs_of('--pin', 'sim=0', '--pin', 'sim=1')
 
 
+def test_pin_refuses_a_cpu_this_process_may_not_use(monkeypatch):
+    from rwpend_bringup import cli
+    monkeypatch.setattr(cli, 'usable_cpus', lambda: {2, 3})      # a container's cgroup
+    with pytest.raises(ValueError, match='may use CPUs 2,3 only'):
+        specs_of('--pin', 'sim=0')
+    assert specs_of('--pin', 'sim=3')['sim'].env['RWPEND_CPUS'] == '3'
+
+
 def test_bench_pins_of_the_real_time_runs(monkeypatch):
-    from rwpend_bringup import bench
-    monkeypatch.setattr(os, 'cpu_count', lambda: 2)
+    from rwpend_bringup import bench, cli
+    monkeypatch.setattr(cli, 'usable_cpus', lambda: {0, 1})
     assert bench.realtime_pins(None, ['separate', 'control']) == {'separate': ('sim=0', 'estimator=0', 'controller=1')}
     assert bench.realtime_pins(['none'], ['separate']) == {}
     assert bench.realtime_pins(['sim=1', 'stack=0'], ['separate', 'control', 'composed']) == {
         'separate': ('sim=1',), 'control': ('sim=1',), 'composed': ('stack=0',)}
     with pytest.raises(ValueError, match="no process 'stack'"):
         bench.realtime_pins(['stack=0'], ['separate'])
-    monkeypatch.setattr(os, 'cpu_count', lambda: 1)
+    monkeypatch.setattr(cli, 'usable_cpus', lambda: {0})          # one CPU: nothing pinned
+    assert bench.realtime_pins(None, ['separate']) == {}
+    monkeypatch.setattr(cli, 'usable_cpus', lambda: {2, 3})       # not CPUs 0 and 1: nothing either
     assert bench.realtime_pins(None, ['separate']) == {}
