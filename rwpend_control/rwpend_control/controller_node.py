@@ -51,8 +51,8 @@ from rwpend_msgs.srv import SetMode
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher,
-                               RwNode, declare_rig, diagnostic_status, fast_path_values, publish_diagnostic, local_subscription,
-                               SlackTimer, run_node, sample_time)
+                               RwNode, SlackTimer, declare_rig, fast_path_values, local_subscription,
+                               publish_diagnostic, run_node, sample_time)
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
 

@@ -31,8 +31,8 @@ from std_srvs.srv import SetBool
 from rwpend_msgs.msg import EncoderCounts, MotorCommand
 from rwpend_ros import wire
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, LocalPublisher,
-                               LockedCallbacks, declare_rig, diagnostic_status, fast_path_values, publish_diagnostic, local_subscription,
-                               SlackTimer, locked, run_node)
+                               LockedCallbacks, SlackTimer, declare_rig, fast_path_values, local_subscription,
+                               locked, publish_diagnostic, run_node)
 
 from .link import DriverLink, LinkConfig
 

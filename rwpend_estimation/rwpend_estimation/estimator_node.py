@@ -32,8 +32,8 @@ from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher, RwNode,
-                               declare_rig, diagnostic_status, fast_path_values, publish_diagnostic, local_subscription, run_node,
-                               SlackTimer, sample_time)
+                               SlackTimer, declare_rig, fast_path_values, local_subscription, publish_diagnostic,
+                               run_node, sample_time)
 from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
                                           make_estimator, switch_estimator)
 

@@ -13,7 +13,6 @@ import threading
 from typing import Any, Callable, Iterable, Mapping
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -603,20 +602,12 @@ def run_nodes(factories: Iterable[Callable[[], Any]], args: list[str] | None = N
     return status
 
 
-def diagnostic_status(name: str, hardware_id: str, level: int, message: str,
-                      values: Mapping[str, Any] | Iterable[tuple[str, Any]] = ()) -> DiagnosticStatus:
-    """A DiagnosticStatus (level: DiagnosticStatus.OK/WARN/ERROR/STALE) with string key-values."""
-    items = values.items() if isinstance(values, Mapping) else values
-    return DiagnosticStatus(level=bytes([level]) if isinstance(level, int) else level, name=name,
-                            hardware_id=hardware_id, message=message,
-                            values=[KeyValue(key=str(k), value=str(v)) for k, v in items])
-
-
 def publish_diagnostic(pub, stamp_ns: int, name: str, hardware_id: str, level, message: str,
                        values: Mapping[str, Any] | Iterable[tuple[str, Any]] = ()) -> None:
-    """One DiagnosticStatus (as :func:`diagnostic_status`) in a DiagnosticArray stamped
-    ``stamp_ns``, published as wire bytes (:func:`rwpend_ros.wire.pack_diagnostic_array`): the
-    same message, without building it as rclpy objects (PERFORMANCE.md, 19.)."""
+    """One DiagnosticStatus (``level``: ``DiagnosticStatus.OK`` / ``WARN`` / ``ERROR`` / ``STALE``
+    or 0-3; ``values``: key-values, each turned into text with ``str()``) in a DiagnosticArray
+    stamped ``stamp_ns``, published as wire bytes (:func:`rwpend_ros.wire.pack_diagnostic_array`),
+    without building the message as rclpy objects (PERFORMANCE.md, 19.)."""
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     pub.publish(wire.pack_diagnostic_array(sec, nanosec, [(level, name, message, hardware_id, values)]))
 

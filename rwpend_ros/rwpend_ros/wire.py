@@ -199,10 +199,10 @@ def _put_string(out: bytearray, s: str) -> None:
 def pack_diagnostic_array(sec: int, nanosec: int, statuses, frame_id: str = '') -> bytes:
     """diagnostic_msgs/DiagnosticArray as wire bytes. ``statuses``: (level, name, message,
     hardware_id, values) each, level an int 0-3 or the one byte of ``DiagnosticStatus.OK`` ...,
-    values (key, value) pairs of any type (``str()`` of each, as
-    :func:`rwpend_ros.common.diagnostic_status` does). The same bytes as rclpy's serializer
-    for the same message (unit-tested), for a fraction of the cost of building the message as
-    objects: a node's diagnostics (~25 key-values) took 0.35-0.6 ms on the project's machine
+    values (key, value) pairs or a mapping, of any type (``str()`` of each). rclpy decodes them to the same message,
+    and they are as long as its own serialization (unit-tested; the alignment padding here is
+    zeros, rclpy leaves it as it finds it), for a fraction of the cost of building the message
+    as objects: a node's diagnostics (~25 key-values) took 0.35-0.6 ms on the project's machine
     that way, holding the GIL (PERFORMANCE.md, 19.)."""
     out = bytearray(_HEAD.pack(sec, nanosec, len(frame_id.encode()) + 1))
     out += frame_id.encode() + b'\x00'

@@ -38,8 +38,8 @@ from rwpend_ros.intra import BUS
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS,
                                RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN, ConfigError, LocalPublisher,
-                               RwNode, declare_rig, diagnostic_status, fast_path_values, publish_diagnostic,
-                               SlackTimer, local_subscription, run_node)
+                               RwNode, SlackTimer, declare_rig, fast_path_values, local_subscription,
+                               publish_diagnostic, run_node)
 from rwpend_sim.sim_core import SimCore
 
 PARAMS = {
