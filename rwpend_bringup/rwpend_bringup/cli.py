@@ -519,8 +519,9 @@ def demo_main(argv) -> int:
         why = 'real time (--realtime), like the rig'
     else:
         why = ('lockstep: deterministic, the same bag every run; on a 2-core VM the real-time '
-               '1 kHz loop misses 0.03-0.8 % of its deadlines with `up --rt-priority 50 --cpu-latency 0`, '
-               'more without (PERFORMANCE.md); `--realtime` to try it')
+               '1 kHz loop of separate processes answered 0-0.26 % of its samples late in 20-60 s runs '
+               'with `up --rt-priority 50 --cpu-latency 0` (more when the host stalls, and without '
+               'those options: PERFORMANCE.md); `--realtime` to try it')
     print(f'rwpend demo: {why}')
     print(f'rwpend demo: {a.duration:g} s simulated in {wall:.1f} s wall\n'
           f'  bag:     {bag}\n  plot:    {plot}\n  metrics: {metrics_file}', flush=True)
