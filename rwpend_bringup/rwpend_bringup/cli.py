@@ -150,7 +150,7 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='CPU affinity of one process of the stack (repeatable; overrides --cpus for '
                    'it): sim, driver, estimator, controller, control (--composed control), stack '
                    '(--composed) or recorder, on the CPUs CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
-                   '--pin sim=0 --pin estimator=0 --pin controller=1 took 12-52 us off the median '
+                   '--pin sim=0 --pin estimator=0 --pin controller=1 took 12-57 us off the median '
                    'loop latency of separate processes (PERFORMANCE.md, 20.)')
     p.add_argument('--composed', nargs='?', const='all', default=None, choices=COMPOSITIONS,
                    help='nodes in one process on one executor: "all" (the default of a bare '
