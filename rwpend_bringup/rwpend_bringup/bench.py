@@ -67,10 +67,10 @@ LAYOUT_ARGS = {'separate': [], 'control': ['--composed', 'control'], 'composed':
 #: the processes of each layout's real-time run (its --record included)
 LAYOUT_PROCESSES = {'separate': ('sim', 'estimator', 'controller', 'recorder'),
                     'control': ('sim', 'control', 'recorder'), 'composed': ('stack', 'recorder')}
-#: ``--pin`` of the real-time runs by default (when CPUs 0 and 1 are usable): separate processes only, the
-#: simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free. Measured
-#: (PERFORMANCE.md, 20.): lower median and p99 latency in every interleaved pair; no gain for
-#: the control layout; lockstep not pinned (see there)
+#: ``--pin`` of the real-time runs by default (when CPUs 0 and 1 are usable): separate processes
+#: only, the simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free.
+#: Measured (PERFORMANCE.md, 20.): lower median latency in 10 of 10 interleaved pairs, lower p99
+#: in 9 of 10; no gain for the control layout; lockstep not pinned (not measured)
 DEFAULT_PINS = {'separate': ('sim=0', 'estimator=0', 'controller=1')}
 SETTLE_S = 4.0            # wall seconds after start before the measured window opens
 #: a lockstep run is stopped after this many wall seconds per simulated second (plus
