@@ -64,9 +64,6 @@ from .launch import Launcher
 DEFAULT_PERIODS = (0.001, 0.0005)
 #: bench layouts -> ./rwpend up arguments
 LAYOUT_ARGS = {'separate': [], 'control': ['--composed', 'control'], 'composed': ['--composed', 'all']}
-#: the processes of each layout's real-time run (its --record included)
-LAYOUT_PROCESSES = {'separate': ('sim', 'estimator', 'controller', 'recorder'),
-                    'control': ('sim', 'control', 'recorder'), 'composed': ('stack', 'recorder')}
 #: ``--pin`` of the real-time runs by default (when CPUs 0 and 1 are usable): separate processes
 #: only, the simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free.
 #: Measured (PERFORMANCE.md, 20.): lower median latency in 10 of 10 interleaved pairs, lower p99
@@ -224,11 +221,12 @@ def realtime_pins(pin: list[str] | None, layouts) -> dict[str, tuple[str, ...]]:
         return dict(DEFAULT_PINS) if {0, 1} <= usable_cpus() else {}
     if [v.strip().lower() for v in pin] == ['none']:
         return {}
-    every = sorted({p for x in layouts for p in LAYOUT_PROCESSES[x]})
-    parsed = parse_pins(pin, every)              # the reason for a bad item
+    # each layout's processes as ./rwpend up builds them, and the recorder of every real-time run
+    processes = {x: {s.name for s in _stack(list(LAYOUT_ARGS[x]))[1]} | {'recorder'} for x in layouts}
+    parsed = parse_pins(pin, sorted(set().union(*processes.values())))   # the reason for a bad item
     out = {}
     for x in layouts:
-        mine = tuple(f'{k}={v}' for k, v in parsed.items() if k in LAYOUT_PROCESSES[x])
+        mine = tuple(f'{k}={v}' for k, v in parsed.items() if k in processes[x])
         if mine:
             out[x] = mine
     return out

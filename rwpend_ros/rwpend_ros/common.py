@@ -284,12 +284,12 @@ class LocalPublisher:
             self._seen, self._steady = count, 0
         else:
             self._steady += 1
-        settling = (len(self.sender.targets) + len(self.local_subscribers()) < count
-                    and self._steady * HOST_REFRESH_PERIOD < HOST_SETTLE_PERIOD)
-        # every HOST_RETRY_PERIOD s the graph is read again only while a subscriber is not
-        # reached directly (one absent at the last reading may have come since): a reading
-        # holds the lock and the GIL for 0.02-0.56 ms (PERFORMANCE.md, 19.)
+        # a subscriber not reached directly: the graph is read again while the number settles,
+        # and then every HOST_RETRY_PERIOD s (one absent at the last reading may have come
+        # since) -- only then: a reading holds the lock and the GIL for 0.02-0.56 ms
+        # (PERFORMANCE.md, 19.)
         missing = len(self.sender.targets) + len(self.local_subscribers()) < count
+        settling = missing and self._steady * HOST_REFRESH_PERIOD < HOST_SETTLE_PERIOD
         if (count == self._count and not self.sender.dropped and not settling
                 and (not missing or self._ticks * HOST_REFRESH_PERIOD < HOST_RETRY_PERIOD)):
             return

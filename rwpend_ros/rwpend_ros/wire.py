@@ -204,8 +204,7 @@ def pack_diagnostic_array(sec: int, nanosec: int, statuses, frame_id: str = '') 
     zeros, rclpy leaves it as it finds it), for a fraction of the cost of building the message
     as objects: a node's diagnostics (~25 key-values) took 0.35-0.6 ms on the project's machine
     that way, holding the GIL (PERFORMANCE.md, 19.)."""
-    out = bytearray(_HEAD.pack(sec, nanosec, len(frame_id.encode()) + 1))
-    out += frame_id.encode() + b'\x00'
+    out = bytearray(pack_header(sec, nanosec, frame_id))
     statuses = list(statuses)
     out += bytes(_pad4(len(out)))
     out += _U32.pack(len(statuses))
