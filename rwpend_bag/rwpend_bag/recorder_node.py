@@ -306,6 +306,10 @@ class Recorder(Node):
         if self._fast_thread is not None:
             self._fast_thread.join(1.0)
         self.poll_fast()             # what is still in the sockets and the batch
+        with CALLBACK_LOCK:          # what waits for a DDS copy that is not coming any more
+            for merge in getattr(self, 'hostbus_merges', {}).values():
+                merge.finish()
+        self.poll_fast()
         hostbus.close_all()          # nothing comes through the fast path after this
         for sub in list(self.subs.values()):
             try:
@@ -329,7 +333,8 @@ def print_report(report: dict, file=sys.stdout) -> None:
         print(f'  {name}: {d["text"]}', file=file)
     for name, c in report.get('fast_path', {}).items():
         print(f"  {name}: same-host fast path {c['fast']}, DDS {c['dds']} "
-              f"(returns to DDS {c['resyncs']})", file=file)
+              f"(returns to DDS {c['resyncs']}, skipped by DDS and taken from the fast path "
+              f"{c['recovered']})", file=file)
     if report.get('progress_held'):
         print(f"  lockstep progress held back {report['progress_held']} time(s) while a fast topic "
               f"waited for DDS", file=file)

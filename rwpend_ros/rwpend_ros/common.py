@@ -426,11 +426,12 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
 
 def fast_path_values(node) -> dict[str, str]:
     """Diagnostics key-values of ``node``'s same-host fast path: one per subscription
-    (messages delivered fast / through DDS, DDS copies dropped, returns to DDS: resyncs) and one
+    (messages delivered fast / through DDS, DDS copies dropped, returns to DDS: resyncs, fast
+    ones DDS skipped: recovered) and one
     per publisher (datagrams sent, sends that failed -- a receiver's socket full --, messages
     also written to DDS)."""
     values = {f'fast_path {topic}': (f"fast {c['fast']}, dds {c['dds']}, duplicates {c['duplicates']}, "
-                                     f"skipped {c['skipped']}, resyncs {c['resyncs']}")
+                                     f"skipped {c['skipped']}, resyncs {c['resyncs']}, recovered {c['recovered']}")
               for topic, c in ((t, m.counters()) for t, m in getattr(node, 'hostbus_merges', {}).items())}
     for topic, pub in getattr(node, 'hostbus_publishers', {}).items():
         sender = pub.sender

@@ -159,10 +159,20 @@ class Merge:
     *held*, with those after it, until DDS brings the marker (at most ``hold`` messages, and
     :data:`HOLD_S` s on a receiving thread: a marker DDS never brings -- a best-effort or
     keep-last reader lost it -- does not stop the stream). A marker that comes after all is
-    delivered then, late: nothing is lost."""
+    delivered then, late: nothing is lost.
+
+    A fast message DDS skipped is delivered from the fast path (counted ``recovered``), late
+    rather than lost: when DDS brings a later one of those remembered while syncing, or when
+    the held messages go without their marker. DDS skips messages written before the
+    publisher's writer matched this subscription's reader (at start-up the graph, hence the
+    fast path, can know a subscriber before DDS has matched it), and those a keep-last reader
+    drops. (The fast copy of a message is always taken before its DDS copy: the publisher
+    sends it first, and :meth:`from_dds` drains the socket first -- so one remembered and not
+    brought by DDS before a later one was not brought at all.)"""
 
     __slots__ = ('deliver', 'hold', 'drain', 'fast_mode', 'pending', 'held', 'waiting', 'last_dds',
-                 'accepted', 'fast', 'dds', 'duplicates', 'skipped', 'resyncs', 'keep', 'syncing', 'sync_set')
+                 'accepted', 'fast', 'dds', 'duplicates', 'skipped', 'resyncs', 'recovered', 'keep', 'syncing',
+                 'sync_set')
 
     def __init__(self, deliver: Callable[[bytes], None], hold: int = 0, keep: int = KEEP) -> None:
         self.deliver = deliver
@@ -187,6 +197,7 @@ class Merge:
         self.duplicates = 0    # DDS copies dropped
         self.skipped = 0       # fast messages not delivered (keep-last depth)
         self.resyncs = 0       # fast -> syncing
+        self.recovered = 0     # delivered from the fast path after DDS skipped them
 
     def from_fast(self, data: bytes, deliver: bool = True, fast_only: bool = False,
                   marker: bytes | None = None, stamp: int = 0) -> None:
@@ -250,11 +261,21 @@ class Merge:
         if self.held:
             self._flush(force=True)
 
+    def finish(self) -> None:
+        """The subscriber stops (the recorder, after its last drain): DDS brings nothing more,
+        so what is held or remembered while syncing is delivered now, in order."""
+        if self.held:
+            self._flush(force=True)
+        else:
+            self._recover(None)
+
     def _flush(self, force: bool = False) -> None:
         """Deliver the held messages up to the first whose marker has not come (``force``: all
         of them); -> fast mode. A marker that comes after all is delivered then: late, never
         lost."""
         held, self.held = self.held, []
+        if force:                # the fast messages remembered while syncing come before them
+            self._recover(None)
         self._to_fast_mode()
         self.waiting = None
         for i, (data, deliver, stamp, marker) in enumerate(held):
@@ -270,7 +291,7 @@ class Merge:
         the publisher sent them before it wrote ``data`` to DDS."""
         if self.drain is not None:
             self.drain()
-        self.last_dds = data
+        previous, self.last_dds = self.last_dds, data
         if self.held and data != self.waiting and any(h[0] == data for h in self.held):
             self._flush(force=True)      # DDS brought a held one: the marker is lost
             take_copy(self.pending, data)
@@ -282,22 +303,54 @@ class Merge:
         if self.fast_mode:
             self.fast_mode = False       # the fast path missed this one: DDS alone until they meet
             self.resyncs += 1
+        synced = data in self.sync_set
+        if synced:                       # remembered while syncing: those before it DDS skipped
+            self._recover(data)
+        elif self.held and data == self.waiting:
+            self._recover(None)          # the marker: every one remembered came before it
+        elif self.syncing:
+            self._recover_chain(previous)
         self.dds += 1
         self.deliver(data)
         if self.held:
             if data == self.waiting:
                 self._flush()
-        elif data in self.sync_set:
-            self._sync(data)
+        elif synced:
+            self._sync()
 
-    def _sync(self, data: bytes) -> None:
-        """Syncing, DDS just delivered ``data``, which the fast path brought too: DDS has
-        delivered everything up to it, so the fast messages after it are delivered now (a
-        slow DDS reader need not catch up with the newest one) and their DDS copies dropped;
-        -> fast mode. One whose marker has not come (the publisher wrote a message to DDS alone
-        in between) is held with those after it, as in :meth:`from_fast`."""
-        while self.syncing and self.syncing.popleft()[0] != data:
-            pass
+    def _recover(self, upto: bytes | None) -> None:
+        """Deliver the fast messages remembered while syncing that come before ``upto`` (None:
+        all of them), which DDS skipped -- it brings ``upto`` now, or the held messages go without
+        their marker -- and take ``upto`` off the list (DDS delivers it)."""
+        while self.syncing:
+            data, deliver, stamp, marker = self.syncing.popleft()
+            self.sync_set.discard(data)
+            if data == upto:
+                return
+            self.recovered += deliver
+            self.accepted = marker
+            self._take(data, deliver, stamp)
+
+    def _recover_chain(self, previous: bytes | None) -> None:
+        """DDS brings, right after ``previous``, a message the fast path did not: the publisher
+        wrote it to DDS alone. A remembered message whose marker is ``previous`` was written to
+        DDS after ``previous`` and before it, so DDS skipped it: delivered now, before it, and so
+        on down the chain (one whose marker is the message just recovered)."""
+        while self.syncing and self.syncing[0][3] == previous:
+            data, deliver, stamp, marker = self.syncing.popleft()
+            self.sync_set.discard(data)
+            self.recovered += deliver
+            self.accepted = marker
+            self._take(data, deliver, stamp)
+            previous = data
+
+    def _sync(self) -> None:
+        """Syncing, DDS just delivered a message the fast path brought too (:meth:`_recover`
+        took it and those before it off the list): DDS has delivered everything up to it, so
+        the fast messages after it are delivered now (a slow DDS reader need not catch up with
+        the newest one) and their DDS copies dropped; -> fast mode. One whose marker has not come
+        (the publisher wrote a message to DDS alone in between) is held with those after it, as
+        in :meth:`from_fast`."""
         rest = list(self.syncing)
         self._to_fast_mode()
         for j, (d, deliver, stamp, marker) in enumerate(rest):
@@ -310,7 +363,7 @@ class Merge:
 
     def counters(self) -> dict[str, int]:
         return {'fast': self.fast, 'dds': self.dds, 'duplicates': self.duplicates,
-                'skipped': self.skipped, 'resyncs': self.resyncs}
+                'skipped': self.skipped, 'resyncs': self.resyncs, 'recovered': self.recovered}
 
 
 class Receiver:

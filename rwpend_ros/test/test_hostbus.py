@@ -51,7 +51,7 @@ def test_merge_syncs_then_delivers_fast_and_drops_the_dds_copies():
     m.from_dds(b'2')
     m.from_dds(b'3')
     assert got == [b'1', b'2', b'3']
-    assert m.counters() == {'fast': 2, 'dds': 1, 'duplicates': 2, 'skipped': 0, 'resyncs': 0}
+    assert m.counters() == {'fast': 2, 'dds': 1, 'duplicates': 2, 'skipped': 0, 'resyncs': 0, 'recovered': 0}
 
 
 def test_merge_goes_back_to_dds_for_a_message_the_fast_path_missed():
@@ -89,18 +89,24 @@ def test_merge_copies_dropped_by_a_keep_last_reader_are_forgotten():
     assert len(m.pending) == KEEP
 
 
-@pytest.mark.parametrize('seed', range(40))
+@pytest.mark.parametrize('seed', range(int(os.environ.get('HOSTBUS_SEEDS', '40'))))
 def test_merge_random_interleavings_deliver_each_message_once_in_order(seed):
-    """Publisher sends 0..N-1; the fast path carries them with random delays (FIFO) and
-    occasional gaps (sender dropped the target; resumed later), DDS carries all of them, some
-    dropped by a keep-last reader. Delivered: strictly increasing, nothing DDS carried is lost."""
+    """Publisher sends 0..N-1, each to DDS and (unless stopped) fast first, each carrying its
+    marker (the message before it: every one goes to DDS here); the fast path carries them with
+    random delays (FIFO) and occasional gaps (sender dropped the target; resumed later), DDS
+    carries them with other delays, some dropped by a keep-last reader. A DDS copy drains the
+    datagrams sent before it (Merge.drain). Delivered: each once, nothing lost that either path
+    carried (one the fast path brought and DDS dropped is recovered), in order -- but for one
+    recovered late because DDS dropped its marker too (then the merge cannot tell it is older
+    than what DDS brings meanwhile)."""
     rng = random.Random(seed)
     n = 400
     events = []
     t_fast = t_dds = 0.0
     stopped = False          # the sender dropped this target
     resume_after = None      # ... and sends again once DDS delivered the messages it skipped
-    dds_carried = set()
+    carried = set()
+    dds_lost = set()
     for i in range(n):
         t = i * 1.0          # publish instants; delays up to 2.5 periods, each path FIFO
         if not stopped and rng.random() < 0.02:
@@ -110,17 +116,33 @@ def test_merge_random_interleavings_deliver_each_message_once_in_order(seed):
         if not stopped and (resume_after is None or t > resume_after):
             t_fast = max(t_fast, t + rng.uniform(0.0, 2.5))
             events.append((t_fast, 0, i))
+            carried.add(i)
         if rng.random() > 0.05:                    # else: dropped by a keep-last DDS reader
             t_dds = max(t_dds, t + rng.uniform(0.0, 2.5))
             events.append((t_dds, 1, i))
-            dds_carried.add(i)
+            carried.add(i)
+        else:
+            dds_lost.add(i)
     events.sort()
+    queue = [i for _, path, i in events if path == 0]    # datagrams, in the order sent
     got = []
     m = Merge(lambda d: got.append(int(d)))
+
+    def take(upto):          # the receiving thread / Merge.drain: datagrams of messages <= upto
+        while queue and queue[0] <= upto:
+            j = queue.pop(0)
+            m.from_fast(str(j).encode(), marker=str(j - 1).encode() if j else None)
+    m.drain = lambda: None
     for _, path, i in events:
-        (m.from_dds if path else m.from_fast)(str(i).encode())
-    assert got == sorted(set(got)), 'once each, in order'
-    assert dds_carried <= set(got), 'nothing DDS carried is lost'
+        take(i)
+        if path:
+            m.from_dds(str(i).encode())
+    take(n)
+    m.finish()                                   # the end: DDS brings nothing more
+    assert len(got) == len(set(got)), 'once each'
+    assert carried <= set(got), 'nothing lost that either path carried'
+    for a, b in zip(got, got[1:]):
+        assert b > a or b - 1 in dds_lost, (a, b)
 
 
 def test_sender_and_receiver_deliver_on_the_receiving_thread_holding_the_lock():
@@ -417,8 +439,8 @@ def test_merge_random_interleavings_with_fast_only_phases(seed):
         if not stopped:
             t_fast = max(t_fast, t + rng.uniform(0.0, 2.5))
             events.append((t_fast, 0, i, fast_only, marker))
+            must_arrive.add(i)                   # one DDS drops is recovered from the fast path
         if fast_only:
-            must_arrive.add(i)
             continue
         marker, fresh = str(i).encode(), False
         if rng.random() > 0.03:
@@ -451,9 +473,9 @@ def test_merge_random_interleavings_with_fast_only_phases(seed):
             m.from_dds(str(i).encode())          # syncing may end in a hold (Merge._sync)
             if m.held and not was_holding:
                 held_since = t
-    m.flush_held()
+    m.finish()                                   # the end: DDS brings nothing more
     assert len(got) == len(set(got)), 'once each'
-    assert must_arrive <= set(got), 'nothing lost'
+    assert must_arrive <= set(got), 'nothing lost that either path carried'
     for a, b in zip(got, got[1:]):    # order breaks only after a marker DDS lost (the double
         assert b > a or any(b - 10 <= d <= a for d in dds_lost), (a, b)   # fault, above)
 
@@ -609,3 +631,67 @@ def test_merge_syncs_on_any_fast_message_dds_brings_not_only_the_newest():
     assert got2 == [b'a'] and m2.held
     m2.from_dds(b'b')
     assert got2 == [b'a', b'b', b'c']
+
+
+def test_merge_recovers_what_dds_skipped_before_its_reader_matched():
+    """The CI failure (lockstep, recorder on the fast path): the controller's first command
+    reached the recorder by the fast path, not by DDS (its writer had not matched the recorder's
+    reader yet). It was dropped when DDS brought a later one; it is delivered now, first."""
+    got = []
+    m = Merge(got.append)
+    m.from_fast(b'c0')                          # both ways, DDS skips it
+    m.from_fast(b'c1', marker=b'c0')
+    m.from_dds(b'c1')
+    assert got == [b'c0', b'c1'] and m.recovered == 1 and m.fast_mode
+    m.from_fast(b'c2', fast_only=True, marker=b'c1')
+    assert got == [b'c0', b'c1', b'c2']
+    # the same with fast-only messages held behind the first (their marker is c0)
+    got.clear()
+    m = Merge(got.append, hold=hostbus.KEEP)
+    m.from_fast(b'c0')
+    m.from_fast(b'c1', fast_only=True, marker=b'c0')
+    m.from_fast(b'c2', marker=b'c1')
+    assert got == [] and m.held
+    m.from_dds(b'c2')                           # a held one: the marker is not coming
+    assert got == [b'c0', b'c1', b'c2'] and m.recovered == 1
+    got.clear()
+    m = Merge(got.append)
+    m.from_fast(b'c0')
+    m.from_fast(b'c1', fast_only=True, marker=b'c0')
+    m.flush_held()                              # the receiving thread's timeout
+    assert got == [b'c0', b'c1']
+
+
+def test_merge_recovers_down_the_chain_of_markers():
+    """DDS drops 5 (keep-last) and the publisher writes 6 to DDS alone (a failed send): 6's DDS
+    copy comes right after 4's, and 5's marker is 4 -- 5 was skipped: delivered before 6."""
+    got = []
+    m = Merge(got.append)
+    m.from_dds(b'3')
+    m.from_fast(b'4', marker=b'3')
+    m.from_fast(b'5', marker=b'4')
+    assert got == [b'3']                        # syncing: 4 and 5 wait for DDS
+    m.from_dds(b'4')
+    assert got == [b'3', b'4', b'5'] and m.fast_mode
+    got.clear()
+    m = Merge(got.append)
+    m.from_fast(b'4', marker=b'3')
+    m.from_dds(b'3')                            # not the one before 4: nothing to recover
+    assert got == [b'3'] and m.syncing
+    m.from_dds(b'6')                            # right after 3 came 6: 4 was skipped
+    assert got == [b'3', b'4', b'6'] and m.recovered == 1 and not m.syncing
+
+
+def test_merge_finish_delivers_what_waits_for_dds():
+    got = []
+    m = Merge(got.append)
+    m.from_fast(b'1')
+    m.from_fast(b'2', marker=b'1')
+    m.finish()
+    assert got == [b'1', b'2']
+    got.clear()
+    m = Merge(got.append)
+    m.from_fast(b'1')
+    m.from_fast(b'2', fast_only=True, marker=b'1')
+    m.finish()
+    assert got == [b'1', b'2'] and not m.held and not m.syncing
