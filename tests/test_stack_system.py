@@ -187,6 +187,8 @@ def test_bad_cli_input_is_refused(tmp_path, ros_env):
     for args, text in ((['up', '--plant', 'usb'], "--plant must be 'sim' or 'serial:PORT'"),
                        (['up', '--set', 'rig.g=-1'], 'rig.g must be > 0'),
                        (['up', '--set', 'nonsense'], 'NODE.PARAM=VALUE'),
+                       (['up', '--set', 'sim.lockstep_timeout=soon'], 'lockstep_timeout must be a number'),
+                       (['up', '--set', 'sim.command_timeout_samples=2.5'], 'must be an integer'),
                        (['up', '--tap', 'x'], 'T:DV'),
                        (['up', '--duration', '-1'], '--duration'),
                        (['up', '--params', str(tmp_path / 'missing.yaml')], 'does not exist'),
@@ -195,6 +197,22 @@ def test_bad_cli_input_is_refused(tmp_path, ros_env):
         p = run(args, ros_env, check=False, timeout=30)
         assert p.returncode == 2, (args, p.stdout, p.stderr)
         assert text in p.stderr, (args, p.stderr)
+
+
+def test_set_takes_an_integer_for_a_float_and_refuses_a_wrong_type(ros_env):
+    """``--set sim.lockstep_timeout=2`` (YAML reads an integer where stack.yaml has 0.5) runs; a
+    string for a number the node alone declares stops the stack with the parameter named, not
+    a traceback from rclpy's type check (one stack.yaml sets is refused by ``up`` itself:
+    test_bad_cli_input_is_refused)."""
+    p = run(['up', '--lockstep', '--duration', '0.2', '--set', 'sim.lockstep_timeout=2',
+             '--set', 'sim.start.delay=0', '--set', 'sim.taps.times=[0]', '--set', 'sim.taps.sizes=[1]'],
+            ros_env, timeout=90)
+    assert 'duration reached' in p.stdout + p.stderr
+    p = run(['up', '--lockstep', '--duration', '0.2', '--set', 'sim.start.delay=soon'], ros_env,
+            check=False, timeout=90)
+    out = p.stdout + p.stderr
+    assert p.returncode != 0 and 'start.delay must be a number' in out, out[-2000:]
+    assert 'Traceback' not in out, out[-3000:]
 
 
 @pytest.mark.parametrize('fast', ['1', '0'], ids=['recorder_fast_path', 'recorder_on_dds'])

@@ -103,6 +103,31 @@ def parse_assignment(text: str) -> tuple[str, str, object]:
     return node, name, value
 
 
+def check_override_types(files, params: dict[str, dict], rig: dict, flag: str = '--set') -> None:
+    """Each value of a ``--params`` file or a ``--set`` must have the type of the value it
+    overrides (rig.yaml, stack.yaml, an earlier ``--params``): rcl keeps the earlier value,
+    silently, when a later file gives another type (measured with rclpy 7.1.6: ``soon`` over 0.5
+    and 2.5 over 1 are ignored). An integer where a float was is fine (the nodes take it as
+    that float). ``params``: the ``--set`` values per node (``flag``: ``-p`` of ``rwpend node``),
+    ``rig``: those of ``rig.*``. ValueError with the reason otherwise, before anything starts."""
+    from rwpend_model.rig import read_params_file, typed_like
+    for node in params:
+        seen = {**read_params_file(rig_file(), node), **read_params_file(stack_file(), node)}
+        sources = [(str(f), read_params_file(f, node)) for f in files]
+        sources.append((flag, {**params[node], **rig}))
+        for source, values in sources:
+            for name, value in values.items():
+                if name in seen and value is not None:
+                    try:
+                        typed_like(name, value, seen[name])
+                    except ValueError as exc:
+                        where = (f'{source} ({node})' if source != flag else f'{flag} {name}'
+                                 if name in rig or flag != '--set' else f'--set {node}.{name}')
+                        raise ValueError(f'{where}: {exc} (the type of {seen[name]!r} it overrides; '
+                                         f'ROS would keep that value)') from None
+                seen[name] = value
+
+
 def namespace_arg(ns: str) -> str:
     ns = '/' + ns.strip('/')
     import re
@@ -214,6 +239,7 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
             rig['rig.' + name] = value
         else:
             params[node][name] = value
+    check_override_types(a.params, params, rig)
     if a.h is not None:
         rig['rig.sample_period'] = float(a.h)
     if rig:
@@ -449,6 +475,10 @@ def node_main(argv, name: str | None = None) -> int:
             read_params_file(f)
         except ValueError as exc:
             return fail(prog, f'{f}: {exc}')
+    try:
+        check_override_types(files, {name: overrides}, {}, flag='-p')
+    except ValueError as exc:
+        return fail(prog, str(exc))
     if ns is None and not any(x.startswith('__ns:=') for x in rest_ros):
         ns = DEFAULT_NS
     cmd = [sys.executable, '-u', '-m', NODE_MODULES[name], '--ros-args']

@@ -129,3 +129,23 @@ def test_bench_pins_of_the_real_time_runs(monkeypatch):
     assert bench.realtime_pins(None, ['separate']) == {}
     monkeypatch.setattr(cli, 'usable_cpus', lambda: {2, 3})       # not CPUs 0 and 1: nothing either
     assert bench.realtime_pins(None, ['separate']) == {}
+
+
+def test_set_and_params_keep_the_type_of_what_they_override(tmp_path):
+    """rcl keeps the earlier value when a later params file gives another type: refused here."""
+    from rwpend_bringup.cli import check_override_types
+    check_override_types([], {'sim': {'lockstep_timeout': 2, 'start.delay': 'x'}}, {'rig.g': 10})
+    for params, rig, text in (({'sim': {'lockstep_timeout': 'soon'}}, {}, '--set sim.lockstep_timeout:'),
+                              ({'sim': {'publish_true_state': 1}}, {}, 'must be true or false'),
+                              ({'controller': {'mode': 3}}, {}, 'mode must be a string'),
+                              ({'sim': {}}, {'rig.g': 'abc'}, '--set rig.g: rig.g must be a number')):
+        with pytest.raises(ValueError, match=text):
+            check_override_types([], params, rig)
+    f = tmp_path / 'p.yaml'
+    f.write_text('/**/sim:\n  ros__parameters:\n    command_timeout_samples: 2.5\n')
+    with pytest.raises(ValueError, match=r'p.yaml \(sim\): command_timeout_samples must be an integer'):
+        check_override_types([f], {'sim': {}}, {})
+    f.write_text('/**/sim:\n  ros__parameters:\n    command_timeout_samples: 5\n')
+    check_override_types([f], {'sim': {'command_timeout_samples': 6}}, {})
+    with pytest.raises(ValueError, match='-p lockstep_timeout:'):
+        check_override_types([], {'sim': {'lockstep_timeout': [1]}}, {}, flag='-p')

@@ -23,7 +23,6 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
@@ -31,8 +30,8 @@ from std_srvs.srv import SetBool
 from rwpend_msgs.msg import EncoderCounts, MotorCommand
 from rwpend_ros import wire
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, LocalPublisher,
-                               LockedCallbacks, SlackTimer, declare_rig, fast_path_values, local_subscription,
-                               locked, publish_diagnostic, run_node)
+                               LockedCallbacks, SlackTimer, declare_read_only, declare_rig, fast_path_values,
+                               local_subscription, locked, publish_diagnostic, run_node)
 
 from .link import DriverLink, LinkConfig
 
@@ -58,9 +57,7 @@ PARAMS = {
 class DriverNode(LockedCallbacks, LifecycleNode):
     def __init__(self) -> None:
         super().__init__('driver')
-        for name, (default, descr) in PARAMS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True))
-        p = {name: self.get_parameter(name).value for name in PARAMS}
+        p = declare_read_only(self, PARAMS)
         self.rig = declare_rig(self)
         if p['counts_per_rev'] == 0:
             p['counts_per_rev'] = int(self.rig.counts_per_rev)

@@ -279,3 +279,32 @@ def load_rig(path: str | Path | None = None, overrides: Mapping[str, Any] | None
 def book_rig(**changes: Any) -> Rig:
     """The rig with the book's listing value g = 9.91, which reproduces its printed numbers (E01)."""
     return load_rig().replace(g=BOOK_G, **changes)
+
+
+def typed_like(name: str, value, default):
+    """``value`` of parameter ``name`` as the type of its ``default``: an integer where a float
+    is expected is that float (YAML, ``--set`` and ``-p`` write 0 for 0.0), likewise in a list of
+    floats; any other type is a ValueError naming the parameter."""
+    def number(v) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool)
+    kind = type(default)
+    if kind is float and number(value):
+        return float(value)
+    if kind is int and isinstance(value, int) and not isinstance(value, bool):
+        return value
+    if kind in (bool, str) and isinstance(value, kind):
+        return value
+    if kind in (list, tuple) and not isinstance(value, (str, bytes, dict)):
+        try:
+            items = list(value)
+        except TypeError:
+            items = None
+        if items is not None:
+            if all(isinstance(d, float) for d in default) and all(number(v) for v in items):
+                return [float(v) for v in items]
+            if all(isinstance(v, type(d)) for v in items for d in default[:1]):
+                return items
+    expected = {float: 'a number', int: 'an integer', bool: 'true or false', str: 'a string'}.get(kind)
+    if expected is None:
+        expected = f'a list like {list(default)!r}'
+    raise ValueError(f'{name} must be {expected}, got {value!r}')

@@ -20,7 +20,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 
-from rwpend_model.rig import Rig, default_rig_file, read_params_file
+from rwpend_model.rig import Rig, default_rig_file, read_params_file, typed_like
 from rwpend_ros import hostbus, wire
 from rwpend_ros.hostbus import CALLBACK_LOCK
 from rwpend_ros.intra import BUS
@@ -450,6 +450,22 @@ def _host_callback_failed(exc: BaseException) -> None:
 
 class ConfigError(ValueError):
     """A node's configuration (parameters) is invalid: the node reports it and exits with status 2."""
+
+
+def declare_read_only(node, params: dict) -> dict:
+    """Declare ``params`` ({name: (default, description)}) read-only on ``node`` and return their
+    values, each of its default's type (:func:`rwpend_model.rig.typed_like`): a value of another type is refused
+    with a ConfigError naming it, rather than rclpy's InvalidParameterTypeException from the
+    node's constructor."""
+    values = {}
+    for name, (default, descr) in params.items():
+        node.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True,
+                                                                  dynamic_typing=True))
+        try:
+            values[name] = typed_like(name, node.get_parameter(name).value, default)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+    return values
 
 
 def declare_rig(node) -> Rig:

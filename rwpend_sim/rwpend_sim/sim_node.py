@@ -25,7 +25,6 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rcl_interfaces.msg import ParameterDescriptor
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
@@ -38,8 +37,8 @@ from rwpend_ros.intra import BUS
 from rwpend_ros.trace import tracer
 from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS,
                                RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN, ConfigError, LocalPublisher,
-                               RwNode, SlackTimer, declare_rig, fast_path_values, local_subscription,
-                               publish_diagnostic, run_node)
+                               RwNode, SlackTimer, declare_read_only, declare_rig, fast_path_values,
+                               local_subscription, publish_diagnostic, run_node)
 from rwpend_sim.sim_core import SimCore
 
 PARAMS = {
@@ -82,9 +81,7 @@ class SimNode(RwNode):
     def __init__(self) -> None:
         super().__init__('sim')
         self.rig = declare_rig(self)
-        for name, (default, descr) in PARAMS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True))
-        p = {name: self.get_parameter(name).value for name in PARAMS}
+        p = declare_read_only(self, PARAMS)
         if (p['lockstep_timeout'] <= 0 or p['diagnostics_period'] <= 0 or p['duration'] < 0
                 or p['start.first_command_timeout'] <= 0):
             raise ConfigError('lockstep_timeout, start.first_command_timeout and diagnostics_period '
