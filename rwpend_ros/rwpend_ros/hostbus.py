@@ -323,13 +323,10 @@ class Merge:
         all of them), which DDS skipped -- it brings ``upto`` now, or the held messages go without
         their marker -- and take ``upto`` off the list (DDS delivers it)."""
         while self.syncing:
-            data, deliver, stamp, marker = self.syncing.popleft()
-            self.sync_set.discard(data)
-            if data == upto:
+            if self.syncing[0][0] == upto:
+                self.sync_set.discard(self.syncing.popleft()[0])
                 return
-            self.recovered += deliver
-            self.accepted = marker
-            self._take(data, deliver, stamp)
+            self._recover_oldest()
 
     def _recover_chain(self, previous: bytes | None) -> None:
         """DDS brings, right after ``previous``, a message the fast path did not: the publisher
@@ -337,12 +334,16 @@ class Merge:
         DDS after ``previous`` and before it, so DDS skipped it: delivered now, before it, and so
         on down the chain (one whose marker is the message just recovered)."""
         while self.syncing and self.syncing[0][3] == previous:
-            data, deliver, stamp, marker = self.syncing.popleft()
-            self.sync_set.discard(data)
-            self.recovered += deliver
-            self.accepted = marker
-            self._take(data, deliver, stamp)
-            previous = data
+            previous = self._recover_oldest()
+
+    def _recover_oldest(self) -> bytes:
+        """Deliver the oldest remembered message (DDS skipped it); returns it."""
+        data, deliver, stamp, marker = self.syncing.popleft()
+        self.sync_set.discard(data)
+        self.recovered += deliver
+        self.accepted = marker
+        self._take(data, deliver, stamp)
+        return data
 
     def _sync(self) -> None:
         """Syncing, DDS just delivered a message the fast path brought too (:meth:`_recover`
