@@ -1,28 +1,44 @@
 # rwpend — two commands on a fresh Debian 12 machine: `make demo` and `make test`.
-.PHONY: setup demo test test-unit test-system bench clean distclean
+.PHONY: setup setup-browser demo test test-unit test-system test-network bench soak lab clean distclean
 
 PY := .venv/bin/python
 
 setup:
 	@bash tools/setup.sh
 
+setup-browser:   # setup + chromium and its driver (the console's page tests)
+	@bash tools/setup.sh --browser
+
 demo: setup
 	@./rwpend demo
 
-test: setup
+test: setup-browser
 	@./rwpend exec python -m pytest
 
 test-unit: setup
 	@./rwpend exec python -m pytest -m "not system"
 
-test-system: setup
+test-system: setup-browser
 	@./rwpend exec python -m pytest -m system
+
+# the lab network tests alone (test hosts in network namespaces: root; part of make test too)
+test-network: setup
+	@./rwpend exec python -m pytest -m network
 
 bench: setup
 	@./rwpend bench
 
+soak: setup
+	@command -v nft >/dev/null 2>&1 || [ "$$(id -u)" != 0 ] || (apt-get update -qq && apt-get install -y -qq nftables) >/dev/null 2>&1 || true
+	@./rwpend soak
+
+# the book's 20 experiments on the simulator (lockstep) -> lab_out/all/ (+ report/index.html)
+lab: setup
+	@rm -rf lab_out/all
+	@./rwpend lab run all --out lab_out/all
+
 clean:
-	rm -rf build demo_out bench_out .pytest_cache
+	rm -rf build demo_out bench_out soak_out lab_out lab_report .pytest_cache
 
 distclean: clean
 	rm -rf .venv

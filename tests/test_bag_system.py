@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import signal
 import subprocess
 import sys
@@ -13,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from rwpend_ros.testenv import test_domain_id
 
 ROOT = Path(__file__).resolve().parents[1]
 PY = str(ROOT / '.venv' / 'bin' / 'python') if (ROOT / '.venv' / 'bin' / 'python').exists() else sys.executable
@@ -76,7 +77,7 @@ SUBSCRIBER = textwrap.dedent('''
 
 def _env():
     env = dict(os.environ)
-    env['ROS_DOMAIN_ID'] = str(random.randint(100, 230))
+    env['ROS_DOMAIN_ID'] = str(test_domain_id())
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['AMENT_PREFIX_PATH'] = str(ROOT / '.venv') + (os.pathsep + env['AMENT_PREFIX_PATH']
                                                        if env.get('AMENT_PREFIX_PATH') else '')
@@ -209,3 +210,42 @@ def test_kill9_recorder_leaves_readable_bag(tmp_path):
     r = subprocess.run([PY, '-m', 'rwpend_bag.cli', 'bag', 'info', str(out)], env=env,
                        capture_output=True, text=True, timeout=30)
     assert r.returncode == 0 and 'recovered' in r.stdout, r.stdout + r.stderr
+
+
+def _wait_for_line(proc, text, timeout):
+    """The first line of proc's stdout containing ``text`` (AssertionError after ``timeout`` s)."""
+    import selectors
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stdout, selectors.EVENT_READ)
+    end = time.monotonic() + timeout
+    seen = []
+    while time.monotonic() < end:
+        if sel.select(timeout=0.2):
+            line = proc.stdout.readline()
+            if not line:
+                break
+            seen.append(line)
+            if text in line:
+                return line
+    raise AssertionError(f'no {text!r} from {proc.args}: {"".join(seen)}')
+
+
+@pytest.mark.system
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_play_ends_cleanly_on_ctrl_c(sig):
+    """Ctrl-C (or SIGTERM) while ./rwpend play publishes: exit status 0, no traceback (it was
+    ``RCLError: Failed to publish: publisher's context is invalid``: rclpy's signal handler shut
+    the context down under the player's publish)."""
+    env = _env()
+    bag = ROOT / 'bags' / 'reference' / 'swingup_tap'
+    play = _track(subprocess.Popen([str(ROOT / 'rwpend'), 'play', str(bag), '--loop', '--rate', '2',
+                                    '--wait', '0'], env=env, stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True))
+    _wait_for_line(play, 'play: playing', 60)
+    time.sleep(1.0)                 # publishing, at ~5 000 messages/s
+    play.send_signal(sig)
+    out, err = play.communicate(timeout=30)
+    assert play.returncode == 0, err[-3000:]
+    assert 'Traceback' not in err and 'context is invalid' not in err, err[-3000:]
+    assert 'play: stopped' in out, out

@@ -22,7 +22,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rwpend_ros.testenv import test_domain_id
 from rwpend_bag.analysis import _decode
+from test_stack_system import answers
 from rwpend_bag.reader import read_bag
 from rwpend_model.plant import Plant
 from rwpend_model.rig import load_rig
@@ -44,8 +46,9 @@ def run(args, env, timeout=300, check=True):
 
 
 def series(bag, topic):
+    """The columns of ``topic``; of ``command`` without the controller's release (test_stack_system.answers)."""
     assert topic in bag.topics, sorted(bag.topics)
-    return _decode(bag, topic)
+    return answers(_decode(bag, topic))
 
 
 def deviation(theta):
@@ -91,8 +94,7 @@ def friction_equilibrium(kdr, sign):
 def auto_run(tmp_path_factory):
     """auto from rest hanging down, a 1 rad/s tap at 10 s, 16 s simulated."""
     import os
-    import random
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.SystemRandom().randint(100, 230)),
+    env = dict(os.environ, ROS_DOMAIN_ID=str(test_domain_id()),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
     bag_dir = tmp_path_factory.mktemp('control') / 'auto'
     run(['up', '--lockstep', '--mode', 'auto', '--duration', '16', '--tap', f'{TAP_T:g}:{TAP_DV:g}',

@@ -20,7 +20,7 @@ DRIVER = textwrap.dedent('''
     import json, math, sys, time
     import rclpy
     from rwpend_msgs.msg import EncoderCounts, MotorCommand
-    from rwpend_ros.common import QOS_CONTROL
+    from rwpend_ros.qos import QOS_CONTROL
     out, n = sys.argv[1], int(sys.argv[2])
     rclpy.init()
     node = rclpy.create_node('user_controller', namespace='/rwpend')

@@ -4,6 +4,8 @@
 #   2. rwpend_msgs built with cmake (ament_cmake + rosidl) and installed into the venv prefix,
 #      like the ROS wheels themselves, so no sourcing is ever needed
 #   3. the ament_python packages installed editable into the venv
+# With --browser (make test, make test-system) also Debian's chromium and chromium-driver, which
+# the console's page tests drive.
 # Each step is skipped when its inputs did not change (stamp files in .venv/).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -11,9 +13,13 @@ ROOT=$PWD
 VENV=$ROOT/.venv
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
-PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_bringup"
+PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_bringup rwpend_lab rwpend_ident rwpend_console"
 
 need_apt=""
+if [ "${1:-}" = --browser ]; then   # the console's page tests (make test): Debian's chromium + its driver
+  command -v chromium >/dev/null 2>&1 || need_apt="$need_apt chromium"
+  command -v chromedriver >/dev/null 2>&1 || need_apt="$need_apt chromium-driver"
+fi
 command -v cmake >/dev/null 2>&1 || need_apt="$need_apt cmake"
 command -v g++ >/dev/null 2>&1 || need_apt="$need_apt g++"
 command -v make >/dev/null 2>&1 || need_apt="$need_apt make"

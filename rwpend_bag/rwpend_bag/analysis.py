@@ -171,9 +171,13 @@ def analyze(bag: Bag | str, series: dict | None = None) -> dict:
         if 'wheel_angle' in st:
             m['limit_cycle'] = limit_cycle(t[a:b], st['wheel_angle'][a:b])
 
-    # loop latency: command receive time - encoder receive time, same seq
+    m['estimator_gaps'] = estimator_gaps(s.get('state'))
+
+    # loop latency: command receive time - encoder receive time, same seq (not in a bag logged
+    # on the simulated clock: there both are the sample's sim time)
     m['loop_latency_ms'] = None
-    if 'command' in s and 'encoders' in s:
+    m['log_time'] = ((bag.metadata or {}).get('custom_data') or {}).get('rwpend.log_time', 'receive')
+    if 'command' in s and 'encoders' in s and m['log_time'] != 'sim':
         es, el = s['encoders']['seq'].astype(np.int64), s['encoders']['_log_ns']
         cseq, cl = s['command']['seq'].astype(np.int64), s['command']['_log_ns']
         order = np.argsort(es, kind='stable')
@@ -187,6 +191,18 @@ def analyze(bag: Bag | str, series: dict | None = None) -> dict:
                                     'max': float(lat.max()), 'matched': int(ok.sum()),
                                     'commands': int(len(cseq)), 'encoders': int(len(es))}
     return m
+
+
+def estimator_gaps(state: dict | None) -> dict | None:
+    """Re-synchronisations of the estimator and the samples it missed, from StateEstimate's
+    ``resyncs`` / ``missed`` (None for a bag without them, e.g. recorded before they existed)."""
+    if state is None or 'resyncs' not in state or not len(state['resyncs']):
+        return None
+    r = state['resyncs'].astype(np.int64)
+    missed = state['missed'].astype(np.int64)
+    changes = int(np.count_nonzero(np.diff(r)))
+    return {'resyncs': changes + int(r[0]), 'missed': int(missed.sum()),
+            'longest_gap': int(missed.max()), 'gaps': int(np.count_nonzero(missed))}
 
 
 def format_metrics(m: dict) -> str:
@@ -210,7 +226,11 @@ def format_metrics(m: dict) -> str:
                                          f"period {lc['period_s']:.3f} s, amplitude "
                                          f"{lc['amplitude_rad']:.4f} rad ({lc['cycles']} cycles)"),
              f"mode switches:        {m.get('mode_switches') if m.get('mode_switches') is not None else 'n/a'}",
-             'loop latency:         ' + ('n/a' if not lat else
+             'estimator gaps:       ' + ('n/a' if not m.get('estimator_gaps') else
+                                         '{resyncs} re-synchronisations, {missed} samples missed in {gaps} '
+                                         'gaps (longest {longest_gap})'.format(**m['estimator_gaps'])),
+             'loop latency:         ' + (('n/a (log times are sim time)' if m.get('log_time') == 'sim'
+                                          else 'n/a') if not lat else
                                          f"p50 {lat['p50']:.3f} ms, p99 {lat['p99']:.3f} ms, "
                                          f"max {lat['max']:.3f} ms ({lat['matched']} matched)")]
     if m.get('error'):

@@ -270,3 +270,13 @@ def seq_of(data: bytes) -> int | None:
     if p + 8 > len(data):
         return None
     return int.from_bytes(data[p:p + 8], 'little')
+
+
+def starts_with_header(type_name: str, schema_text: str) -> bool:
+    """True when the type's first field is a ``std_msgs/Header`` (not an array)."""
+    try:
+        types = parse_schema(type_name, schema_text)
+    except ValueError:
+        return False
+    f = types.get(_resolve(type_name, type_name.split('/')[0]), [])
+    return bool(f) and f[0].type == 'std_msgs/msg/Header' and f[0].array is None

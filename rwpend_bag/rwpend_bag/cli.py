@@ -54,6 +54,10 @@ def _record(argv) -> int:
                    help='publish on TOPIC (rosgraph_msgs/Clock) every 10th /clock recorded: a lockstep '
                         'simulator with lockstep_recorder_window waits for it (./rwpend up --lockstep '
                         '--record sets it)')
+    p.add_argument('--sim-time', action='store_true',
+                   help='log times on the simulated clock (header stamps, /clock), written in a '
+                        'deterministic order: two lockstep runs give the same bag (./rwpend up '
+                        '--lockstep --record sets it; rwpend_bag.logtime)')
     p.add_argument('topics', nargs='*', help='topics to record')
     a = p.parse_args(argv)
     if a.all and a.topics:
@@ -76,7 +80,7 @@ def _record(argv) -> int:
         except InvalidTopicNameException as exc:
             return _usage_error(p.prog, f'--progress: invalid topic name {a.progress!r} ({exc})')
     from .recorder_node import run_recorder
-    return run_recorder(str(out), topics, a.all, progress)
+    return run_recorder(str(out), topics, a.all, progress, a.sim_time)
 
 
 # ------------------------------------------------------------------ info

@@ -47,7 +47,8 @@ def bag_info(bag: Bag | str) -> dict:
     out = {'path': str(bag.path), 'files': [str(f) for f in bag.files], 'complete': bag.complete,
            'warnings': list(bag.warnings), 'message_count': bag.message_count,
            'start_ns': rng[0] if rng else None, 'end_ns': rng[1] if rng else None,
-           'duration_s': (rng[1] - rng[0]) / 1e9 if rng else 0.0, 'topics': {}}
+           'duration_s': (rng[1] - rng[0]) / 1e9 if rng else 0.0, 'topics': {},
+           'log_time': ((bag.metadata or {}).get('custom_data') or {}).get('rwpend.log_time', 'receive')}
     for name in sorted(bag.topics):
         t = bag.topics[name]
         lt = t.log_ns()
@@ -65,6 +66,8 @@ def format_info(info: dict) -> str:
              f"Files:      {', '.join(info['files'])}",
              f"Complete:   {'yes' if info['complete'] else 'NO (recovered by scanning)'}",
              f"Duration:   {info['duration_s']:.3f} s",
+             'Log times:  ' + ('sim time (lockstep: header stamps, /clock)' if info.get('log_time') == 'sim'
+                               else 'receive time'),
              f"Messages:   {info['message_count']}"]
     for w in info['warnings']:
         lines.append(f'Warning:    {w}')

@@ -93,8 +93,13 @@ def field_types(text: str, pkg: str) -> list[str]:
 @functools.lru_cache(maxsize=None)
 def joined_definition(type_name: str) -> str:
     """The full ros2msg definition of a type with all its dependencies (as rosbag2 writes it)."""
-    pkg, name = split_type(type_name)
-    main = msg_text(type_name)
+    pkg, _ = split_type(type_name)
+    return join_definition(msg_text(type_name), pkg)
+
+
+def join_definition(main: str, pkg: str) -> str:
+    """``main`` (a .msg text, or one part of a .srv, of package ``pkg``) followed by the
+    definitions of every type it uses, as :func:`joined_definition` writes them."""
     order: list[str] = []
     todo = field_types(main, pkg)
     while todo:

@@ -61,11 +61,17 @@ def schedule(bag: Bag, topics=None, remap: dict | None = None, start_s: float = 
     return Schedule(pts, idx, ts, rel, datas)
 
 
-def wait_until(target: float) -> None:
-    """Sleep until shortly before ``target`` (time.monotonic), then busy-wait."""
+def wait_until(target: float, stop=None) -> bool:
+    """Sleep until shortly before ``target`` (time.monotonic), then busy-wait; True at the
+    target, False as soon as ``stop`` (a threading.Event, optional) is set."""
     while True:
+        if stop is not None and stop.is_set():
+            return False
         dt = target - time.monotonic()
         if dt <= 0:
-            return
+            return True
         if dt > SPIN_S:
-            time.sleep(dt - SPIN_S)
+            if stop is None:
+                time.sleep(dt - SPIN_S)
+            elif stop.wait(dt - SPIN_S):
+                return False

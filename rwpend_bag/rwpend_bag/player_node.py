@@ -2,14 +2,21 @@
 
 The schedule (pure, :func:`rwpend_bag.player_core.schedule`) is played against a monotonic
 clock: sleep until ~1.5 ms before each message, then busy-wait, then publish the wire bytes.
+Ctrl-C (SIGINT) or SIGTERM ends the playback between two messages (exit status 0): the player
+publishes from its own loop, not from an executor, so rclpy's signal handler -- which shuts the
+context down at once, under a publish in progress ("publisher's context is invalid") -- is not
+installed; the player's own handler only asks the loop to stop.
 """
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 import time
 
 import rclpy
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from . import msgdefs
@@ -47,15 +54,15 @@ class Player(Node):
             self._Clock = Clock
             self.clock_pub = self.create_publisher(Clock, '/clock', 10)
 
-    def wait_for_subscribers(self, timeout: float) -> None:
+    def wait_for_subscribers(self, timeout: float, stop: threading.Event) -> None:
         end = time.monotonic() + timeout
-        while time.monotonic() < end:
+        while time.monotonic() < end and not stop.is_set():
             if any(p.get_subscription_count() > 0 for p in self.pubs.values()):
                 return
-            time.sleep(0.02)
+            stop.wait(0.02)
 
-    def play_once(self, rate: float) -> list[float]:
-        """One pass; returns the lateness (s) of every publish."""
+    def play_once(self, rate: float, stop: threading.Event) -> list[float]:
+        """One pass, until ``stop`` is set; returns the lateness (s) of every publish."""
         s = self.sched
         idx, data, rel = s.topic_index, s.datas, s.rel_ns
         pubs = self.pubs
@@ -65,7 +72,8 @@ class Player(Node):
         t0 = time.monotonic() + 0.05
         for k in range(len(data)):
             target = t0 + rel[k] / 1e9 / rate
-            wait_until(target)
+            if not wait_until(target, stop):
+                break
             late.append(time.monotonic() - target)
             if clock_pub is not None:
                 ns = int(s.log_ns[k])
@@ -83,27 +91,36 @@ class Player(Node):
 def run(sched: Schedule, rate: float, loop: bool, clock: bool, wait: float = 2.0) -> int:
     from rwpend_ros.transport import apply_transport_or_exit
     apply_transport_or_exit()  # before rclpy.init
-    rclpy.init(args=[])  # not sys.argv: its --remap a:=b would become rcl remap rules
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     node = None
     try:
+        # not sys.argv: its --remap a:=b would become rcl remap rules; no rclpy signal handler
+        # (module doc)
+        rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
         node = Player(sched, clock)
         if not node.pubs:
             print('play: no playable topic', file=sys.stderr, flush=True)
             return 1
-        node.wait_for_subscribers(wait)
-        while True:
-            late = node.play_once(rate)
+        node.wait_for_subscribers(wait, stop)
+        span = float(sched.rel_ns[-1]) / 1e9 if len(sched) else 0.0
+        print(f'play: playing {len(sched)} messages on {len(node.pubs)} topics ({span:.1f} s at rate '
+              f'{rate:g}{", looped" if loop else ""})', flush=True)
+        while not stop.is_set():
+            late = node.play_once(rate, stop)
             if late:
                 late.sort()
                 print(f'play: {len(late)} messages, lateness median {late[len(late)//2]*1e3:.3f} ms, '
                       f'max {late[-1]*1e3:.3f} ms', flush=True)
             if not loop:
                 break
+        if stop.is_set():
+            print('play: stopped', flush=True)
         time.sleep(0.3)  # let reliable writers deliver the tail
-    except KeyboardInterrupt:
-        pass
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return 0

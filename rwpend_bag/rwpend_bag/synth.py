@@ -61,21 +61,23 @@ def make_run(duration=10.0, rate=1000.0, t_up=3.0, lc_period=2.0, lc_amp=0.5, la
                                                   pendulum_counts=int(theta / (2 * math.pi) * 4000),
                                                   motor_counts=int((wheel - theta) / (2 * math.pi) * 4000))
         out.append(('/rwpend/encoders', ns, bytes(ser(enc, 'rwpend_msgs/msg/EncoderCounts'))))
-        ps = M['rwpend_msgs/msg/PlantState'](header=hdr, seq=k, theta=theta, theta_dot=theta_dot,
+        ps = M['rwpend_msgs/msg/PlantState'](header=hdr, seq=k, command_seq=k - 1, theta=theta, theta_dot=theta_dot,
                                              wheel_angle=wheel, wheel_rate=wheel_rate,
                                              u_commanded=u, u_applied=u, friction=0.0,
                                              disturbance=0.0, stuck=False, command_timeout=False)
         out.append(('/rwpend/sim/true_state', ns, bytes(ser(ps, 'rwpend_msgs/msg/PlantState'))))
         energy = 1 - math.cos(theta) + 0.5 * (theta_dot / 6.0) ** 2
+        # one re-synchronisation of the estimator half way, after 40 missing samples
         st = M['rwpend_msgs/msg/StateEstimate'](header=hdr, seq=k, theta=theta, theta_dot=theta_dot,
                                                 wheel_angle=wheel, wheel_rate=wheel_rate,
-                                                friction=0.0, energy=energy, estimator='observer3')
+                                                friction=0.0, energy=energy, resyncs=int(k >= n // 2),
+                                                missed=40 if k == n // 2 else 0, estimator='observer3')
         out.append(('/rwpend/state', ns + 100_000, bytes(ser(st, 'rwpend_msgs/msg/StateEstimate'))))
         if k not in drop_command:
             cns = ns + int(latency * 1e9)
             chdr = Header(stamp=Time(sec=cns // 1_000_000_000, nanosec=cns % 1_000_000_000),
                           frame_id='rig')
-            cmd = M['rwpend_msgs/msg/MotorCommand'](header=chdr, seq=k, u=u)
+            cmd = M['rwpend_msgs/msg/MotorCommand'](header=chdr, seq=k, u=u, controller_id=0, release=False)
             out.append(('/rwpend/command', cns, bytes(ser(cmd, 'rwpend_msgs/msg/MotorCommand'))))
         new_law = 'swingup' if t < t_up else ('catch' if t < t_up + 0.5 else 'balance')
         if new_law != law:

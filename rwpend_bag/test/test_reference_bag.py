@@ -28,6 +28,7 @@ def test_reference_run_swings_up_balances_and_survives_the_tap(tmp_path):
     assert m['time_to_catch_s'] == pytest.approx(m['swing_up_time_s'], abs=0.1)
     assert m['balance_rms_settled_rad'] < 0.01
     assert m['loop_latency_ms']['matched'] == 10000
+    assert m['estimator_gaps'] is None          # recorded before StateEstimate had resyncs/missed
     truth = _decode(read_bag(BAG), '/rwpend/sim/true_state')
     t = (truth['_stamp_ns'] - truth['_stamp_ns'][0]) / 1e9
     err = np.abs(wrap(truth['theta'] - np.pi))

@@ -39,6 +39,13 @@ from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` r
    all processes per simulated second.
 3. **bag decode** throughput of rwpend_bag's reader (read + column-wise CDR decode of the
    biggest real-time bag): messages/s.
+4. **scale** (issue 22): how many simulated rigs at 1 kHz the machine carries -- 1, 2, 3 ... rigs
+   in real time at once (``--scale-layout``, default composed: one process per rig; no recorder;
+   each rig its own namespace /scaleN and domain id, as a lab separates them), ``--scale-duration``
+   s measured at each step, until the late fraction at the plants (from the traces: command k
+   received after the instant of sample k+1, or never, over every rig's samples) passes 0.1 %
+   (``SCALE_LATE_LIMIT``) or ``--scale-max`` rigs run. ``rigs_carried``: the most rigs with every
+   step up to it within the limit. Not a pass/fail test: a figure of this machine at its load.
 
 Results: printed, and written to ``OUTDIR/bench.json`` (plus each run's log; bags with
 ``--keep-bags``). PERFORMANCE.md has the figures of this machine.
@@ -565,6 +572,123 @@ def run_decode(bag: Path) -> dict:
     return r
 
 
+# ------------------------------------------------------------------ scale: rigs per machine
+#: the late fraction (commands received by the plant after the next sample instant, or never)
+#: above which a machine no longer carries its rigs
+SCALE_LATE_LIMIT = 0.001
+
+
+def scale_carried(steps: list[dict], limit: float = SCALE_LATE_LIMIT) -> int:
+    """The most rigs the machine carried: the largest n such that every step with up to n rigs
+    had a late fraction of at most ``limit`` (the steps in any order; a step without a figure
+    counts as failed). 0 when even one rig was late."""
+    carried = 0
+    for s in sorted(steps, key=lambda s: s['rigs']):
+        f = s.get('late_fraction')
+        if f is None or f > limit:
+            break
+        carried = s['rigs']
+    return carried
+
+
+def scale_step_figures(rigs: list[dict]) -> dict:
+    """The late fraction of one step of the scale run over all its rigs (late samples / traced
+    samples, each rig's from :func:`trace_metrics`), the worst rig's and the median latency of
+    the worst rig; None when a rig has no traced sample."""
+    if not rigs or any(not r.get('plant_traced_samples') for r in rigs):
+        return {'late_fraction': None, 'worst_rig_late_fraction': None}
+    late = sum(r['plant_rx_late_samples'] for r in rigs)
+    n = sum(r['plant_traced_samples'] for r in rigs)
+    worst = max(rigs, key=lambda r: r['plant_rx_late_fraction'])
+    return {'late_fraction': late / n, 'late_samples': late, 'samples': n,
+            'worst_rig_late_fraction': worst['plant_rx_late_fraction'],
+            'worst_rig_latency_us': worst.get('plant_latency_us')}
+
+
+def window_seqs(directory: Path, t0_ns: int, t1_ns: int) -> tuple[int, int] | None:
+    """The first and last seq of a run's trace whose sample instant (``sim.tick``, monotonic)
+    lies in [t0_ns, t1_ns)."""
+    from rwpend_ros.trace import load
+    ks = [k for k, t in load(directory).get('sim.tick', {}).items() if t0_ns <= t < t1_ns]
+    return (min(ks), max(ks)) if ks else None
+
+
+def run_scale(out: Path, h: float, duration: float, max_rigs: int, env: dict, layout: str,
+              echo=None, up_extra=(), say=None, limit: float = SCALE_LATE_LIMIT) -> dict:
+    """1, 2, 3 ... simulated rigs in real time at once on this machine, each the stack of
+    ``./rwpend up --mode auto`` (``layout``, no recorder) in a namespace and domain id of its own
+    (/scaleN, the environment's domain id + N - 1: one rig per domain, as a lab separates them),
+    until the late fraction at the plants (from the nodes' traces: command k received after the
+    instant of sample k+1, or never) passes ``limit`` or ``max_rigs`` is reached. Each step's
+    window opens when every rig has been running for SETTLE_S s and lasts ``duration`` s."""
+    say = say or (lambda s: None)
+    base = int(env.get('ROS_DOMAIN_ID', '60'))
+    steps = []
+    for n in range(1, max_rigs + 1):
+        say(f'rwpend bench: scale, {n} rig(s) at {1 / h:g} Hz, {duration:g} s ...')
+        tag = f'scale_{n}'
+        log = _Tee(out / f'{tag}.log', echo)
+        launchers, traces = [], []
+        load0 = _loadavg()
+        cpu_req = None
+        try:
+            for i in range(1, n + 1):
+                ns = f'/scale{i}'
+                a, specs, files = _stack(['--mode', 'auto', '--h', repr(h), '--ns', ns, *up_extra,
+                                          *LAYOUT_ARGS[layout]])
+                if cpu_req is None:
+                    cpu_req = _cpu_latency_request(a)
+                renv, tdir = _with_trace({**env, 'ROS_DOMAIN_ID': str(base + i - 1)},
+                                         out / f'{tag}_{i}.trace')
+                la = Launcher(specs, namespace=a.ns, params_files=files, env=renv, out=log)
+                launchers.append(la)
+                traces.append(tdir)
+                la.start()
+            # the processes of n rigs start on two CPUs: discovery and imports take longer
+            settle = SETTLE_S + 1.0 * n
+            reasons = [la.wait(settle / n) for la in launchers]
+            a0, s0 = all_cpu_snapshot(), cpu_times()
+            t0, m0 = time.monotonic(), time.monotonic_ns()
+            end = t0 + duration
+            for la in launchers:
+                r = la.wait(max(0.0, end - time.monotonic()))
+                reasons.append(r)
+            t1, m1 = time.monotonic(), time.monotonic_ns()
+            a1, s1 = all_cpu_snapshot(), cpu_times()
+            ours = {os.getpid(), *(p.pid for la in launchers for p in la.procs.values())}
+            bad = [r for r in reasons if r not in ('duration',)]
+        finally:
+            codes = [la.stop() for la in launchers]
+            if cpu_req is not None:
+                cpu_req.close()
+            log.close()
+        rigs = []
+        for i, tdir in enumerate(traces, 1):
+            if tdir is None:
+                rigs.append({'rig': i, 'trace_error': 'RWPEND_TRACE=0: no late fraction'})
+                continue
+            w = window_seqs(tdir, m0, m1)
+            m = trace_metrics(tdir, w) if w else {'trace_error': f'no sample in the window ({tdir})'}
+            rigs.append({'rig': i, 'window_seq': w, **{k: m.get(k) for k in (
+                'plant_rx_late_fraction', 'plant_rx_late_samples', 'plant_traced_samples',
+                'plant_latency_us', 'trace_error') if k in m}})
+            shutil.rmtree(tdir, ignore_errors=True)
+        step = {'rigs': n, 'h_s': h, 'layout': layout, 'window_s': round(t1 - t0, 3),
+                'stop_reasons': bad, 'exit_codes': codes, 'loadavg_before': load0,
+                'loadavg_after': _loadavg(), 'other_cpu_cores': other_cpu_cores(a0, a1, ours, t1 - t0),
+                'host_steal_pct': steal_percent(s0, s1), 'log': str(out / f'{tag}.log'),
+                **scale_step_figures(rigs), 'per_rig': rigs}
+        steps.append(step)
+        f = step['late_fraction']
+        say(f'rwpend bench: scale, {n} rig(s): late {"n/a" if f is None else f"{100 * f:.3f} %"}')
+        if f is None or f > limit:
+            break
+    return {'h_s': h, 'layout': layout, 'late_limit': limit, 'max_rigs': max_rigs,
+            'rigs_carried': scale_carried(steps, limit),
+            'reached_max': bool(steps) and len(steps) == max_rigs and scale_carried(steps, limit) == max_rigs,
+            'steps': steps}
+
+
 # ------------------------------------------------------------------ report
 def _fmt(v, nd=0):
     return 'n/a' if v is None else f'{v:.{nd}f}'
@@ -624,6 +748,21 @@ def summary_text(res: dict) -> str:
             if r.get('stages_us'):
                 lines.append(f"            step p50 {_fmt((r.get('step_us') or {}).get('p50'))} us; stages p50/p99 (us): "
                              + _stages_text(r['stages_us']))
+    sc = res.get('scale')
+    if sc:
+        lines.append(f"scale (simulated rigs at {1 / sc['h_s']:g} Hz on this machine, {sc['layout']} layout, "
+                     f"no recorder; late = command k received by the plant after sample k+1, limit "
+                     f"{100 * sc['late_limit']:g} %): {sc['rigs_carried']} rig(s) carried"
+                     + (f" (the most tried: {sc['max_rigs']})" if sc.get('reached_max') else ''))
+        for s in sc['steps']:
+            f, w = s.get('late_fraction'), s.get('worst_rig_late_fraction')
+            lat = s.get('worst_rig_latency_us') or {}
+            lines.append(f"  {s['rigs']:>2} rig(s): late {_fmt(None if f is None else 100 * f, 3)} % "
+                         f"(worst rig {_fmt(None if w is None else 100 * w, 3)} %, its latency p50 "
+                         f"{_fmt(lat.get('p50'))} p99 {_fmt(lat.get('p99'))} us), {s.get('samples', 0)} samples; "
+                         f"load {s.get('loadavg_before')}, other processes {_fmt(s.get('other_cpu_cores'), 2)} "
+                         f"cores, steal {_fmt(s.get('host_steal_pct'), 1)} %"
+                         + (f"; stopped: {s['stop_reasons']}" if s.get('stop_reasons') else ''))
     d = res.get('decode')
     if d:
         lines.append(f"bag decode: {d['messages']} messages, read {_fmt(d.get('read_s'), 3)} s, decode "
@@ -662,6 +801,15 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--no-realtime', action='store_true', help='skip the real-time runs')
     p.add_argument('--no-lockstep', action='store_true', help='skip the lockstep runs')
     p.add_argument('--no-decode', action='store_true', help='skip the bag decode benchmark')
+    p.add_argument('--no-scale', action='store_true', help='skip the scale run (rigs per machine)')
+    p.add_argument('--scale-max', type=int, default=8, metavar='N',
+                   help='the scale run adds simulated rigs one by one up to N (default 8) or until '
+                   'the late fraction at the plants passes 0.1 %%')
+    p.add_argument('--scale-duration', type=float, default=None, metavar='S',
+                   help='wall seconds measured at each step of the scale run (default 20; 8 with --quick)')
+    p.add_argument('--scale-layout', default='composed', choices=tuple(LAYOUT_ARGS),
+                   help='the layout of each rig of the scale run (default composed: one process '
+                   'per rig, the cheapest)')
     p.add_argument('--domain-id', type=int, default=None,
                    help='ROS_DOMAIN_ID of the runs (default: the environment\'s, else 60)')
     p.add_argument('--ns', default='/bench', help='namespace of the benchmarked rig (default /bench)')
@@ -736,7 +884,7 @@ def main(argv=None) -> int:
                         'set': list(a.set), 'cpus': a.cpus, 'pin_realtime': {k: list(v) for k, v in pins.items()},
                         'cpu_latency_us': None if cpu_latency is None else int(cpu_latency),
                         'command': 'rwpend bench ' + ' '.join(sys.argv[1:] if argv is None else argv)},
-           'realtime': [], 'lockstep': [], 'decode': None}
+           'realtime': [], 'lockstep': [], 'decode': None, 'scale': None}
     say = (lambda s: print(s, file=sys.stderr, flush=True))
     try:
         if not a.no_realtime:
@@ -753,6 +901,13 @@ def main(argv=None) -> int:
                         f'recorder {"on" if record else "off"} ...')
                     res['lockstep'].append(run_lockstep(out, periods[0], ls_dur, layout, record, env,
                                                         a.ns, echo, up_extra=up_extra))
+        if not a.no_scale and a.scale_max >= 1:
+            sdur = a.scale_duration if a.scale_duration is not None else (8.0 if a.quick else 20.0)
+            res['settings'].update({'scale_duration_s': sdur, 'scale_max': a.scale_max,
+                                    'scale_layout': a.scale_layout})
+            # no pinning: n rigs share the CPUs as the scheduler places them
+            res['scale'] = run_scale(out, periods[0], sdur, a.scale_max, env, a.scale_layout, echo,
+                                     up_extra=up_extra, say=say)
         if not a.no_decode:
             bags = [Path(r['bag']) for r in res['realtime'] + res['lockstep']
                     if r.get('bag') and Path(r['bag']).is_dir()]

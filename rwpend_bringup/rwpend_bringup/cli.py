@@ -10,6 +10,7 @@ Commands (``./rwpend COMMAND --help`` for each):
   mode      set the controller's mode (off, wheel_velocity, wheel_angle, balance, swingup, auto)
   tap       tap the simulated pendulum (theta_dot jumps by DV rad/s)
   estop     raise the latched e-stop (``--clear`` to clear it)
+  graph     the nodes this host sees, and who publishes what each subscribes to
   gains     the book's gain designs, and applying them to a running controller
   record    record topics to a rosbag2 MCAP bag
   play      replay a bag
@@ -17,6 +18,11 @@ Commands (``./rwpend COMMAND --help`` for each):
   analyze   metrics and plots of a run
   emulate   the rig's microcontroller on a pseudo-terminal (for --plant serial:PATH)
   bench     the real-time / lockstep benchmark (JSON in bench_out/)
+  soak      real-time runs under load with injected faults, judged from the bags (make soak)
+  lab       the book's 20 experiments: lab list | lab run N | lab report DIR...
+  identify  identify a rig (its rig YAML, a report), or --check RIG.yaml whether it still matches
+  console   the lab console: the rig in a web browser (plots, gains, e-stop) + the Foxglove bridge
+  bridge    the Foxglove WebSocket bridge alone (ws://127.0.0.1:8765)
   exec      run any command inside the project's ROS environment (handled by ./rwpend)
 """
 from __future__ import annotations
@@ -43,6 +49,13 @@ NODE_MODULES = {
 COMPOSITIONS = ('all', 'control')
 #: ./rwpend up --lockstep --record: samples the simulator may run ahead of the recorder
 LOCKSTEP_RECORDER_WINDOW = 50
+#: ./rwpend up in real time: the loop's SCHED_FIFO priority where permitted (--rt-priority)
+DEFAULT_RT_PRIORITY = 50
+#: ./rwpend up without --composed: the layout per plant (PERFORMANCE.md, "Layouts")
+DEFAULT_LAYOUT = {'sim': 'control', 'serial': 'control'}
+LAYOUT_TEXT = {'none': 'separate processes (plant, estimator, controller)',
+               'control': 'estimator + controller in one process, the plant in its own',
+               'all': 'plant, estimator and controller in one process'}
 
 
 class Parser(argparse.ArgumentParser):
@@ -103,28 +116,36 @@ def parse_assignment(text: str) -> tuple[str, str, object]:
     return node, name, value
 
 
-def check_override_types(files, params: dict[str, dict], rig: dict, flag: str = '--set') -> None:
+def check_override_types(files, params: dict[str, dict], rig: dict, flag: str = '--set',
+                         rig_path=None) -> None:
     """Each value of a ``--params`` file or a ``--set`` must have the type of the value it
     overrides (rig.yaml, stack.yaml, an earlier ``--params``): rcl keeps the earlier value,
     silently, when a later file gives another type (measured with rclpy 7.1.6: ``soon`` over 0.5
     and 2.5 over 1 are ignored). An integer where a float was is fine (the nodes take it as
     that float). ``params``: the ``--set`` values per node (``flag``: ``-p`` of ``rwpend node``),
-    ``rig``: those of ``rig.*``. ValueError with the reason otherwise, before anything starts."""
+    ``rig``: those of ``rig.*``; where such a value overrides a string and YAML read it as a
+    boolean (``mode=off``: false), it is replaced by the string the nodes take for it, 'off' /
+    'on' (rwpend_ros.paramspec). ValueError with the reason otherwise, before anything starts."""
     from rwpend_model.rig import read_params_file, typed_like
     for node in params:
-        seen = {**read_params_file(rig_file(), node), **read_params_file(stack_file(), node)}
+        seen = {**read_params_file(rig_path or rig_file(), node), **read_params_file(stack_file(), node)}
         sources = [(str(f), read_params_file(f, node)) for f in files]
         sources.append((flag, {**params[node], **rig}))
         for source, values in sources:
             for name, value in values.items():
                 if name in seen and value is not None:
+                    if source == flag and isinstance(seen[name], str) and isinstance(value, bool):
+                        value = 'on' if value else 'off'
+                        params[node][name] = value
                     try:
                         typed_like(name, value, seen[name])
                     except ValueError as exc:
                         where = (f'{source} ({node})' if source != flag else f'{flag} {name}'
                                  if name in rig or flag != '--set' else f'--set {node}.{name}')
+                        hint = (" (YAML reads on/off/yes/no as true/false: quote the string, 'off')"
+                                if isinstance(value, bool) and isinstance(seen[name], str) else '')
                         raise ValueError(f'{where}: {exc} (the type of {seen[name]!r} it overrides; '
-                                         f'ROS would keep that value)') from None
+                                         f'ROS would keep that value){hint}') from None
                 seen[name] = value
 
 
@@ -144,7 +165,8 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='simulator in lockstep with the loop (sim time on /clock, deterministic)')
     p.add_argument('--duration', type=float, default=None,
                    help='stop after S seconds of the run (simulated time from the first sample with '
-                   'the simulator, wall time with a serial plant)')
+                   'the simulator, wall time from the first command sent to the device with a '
+                   'serial plant: start-up on a busy machine does not shorten the run)')
     p.add_argument('--mode', choices=MODES, default=None, help='controller mode at start')
     p.add_argument('--estimator', default=None, help='estimator at start (see estimator node)')
     p.add_argument('--record', metavar='DIR', default=None, help='record every topic to this bag')
@@ -153,15 +175,25 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--set', action='append', default=[], metavar='NODE.PARAM=VALUE',
                    help="parameter override, e.g. controller.balance.design.omega0=2wp, rig.g=9.91")
     p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS, help=f'namespace of the rig (default {DEFAULT_NS})')
+    p.add_argument('--rig', metavar='FILE', default=None,
+                   help='the rig YAML every node reads (estimator, controller and its gain designs, plant): '
+                   'a complete rig file such as DIR/rig.yaml of ./rwpend identify (default: the shipped '
+                   'rwpend_model/config/rig.yaml)')
+    p.add_argument('--plant-rig', metavar='FILE', default=None,
+                   help='sim: the simulated plant\'s physical truth from this rig file of its own, while the '
+                   'estimator and the controller keep reading --rig; the simulator reports the difference '
+                   '(like --set sim.rig.KEY=VALUE for every key)')
     p.add_argument('--theta0', type=float, default=None, help='sim: initial pendulum angle (rad, 0 = down)')
     p.add_argument('--tap', action='append', default=[], metavar='T:DV',
                    help='sim: scripted tap at simulated time T s, theta_dot += DV rad/s')
     p.add_argument('--h', type=float, default=None, help='sample period (s), all nodes (rig.sample_period)')
     p.add_argument('--no-controller', action='store_true', help='do not start the controller')
-    p.add_argument('--rt-priority', type=int, default=0, metavar='N',
+    p.add_argument('--rt-priority', type=int, default=None, metavar='N',
                    help='SCHED_FIFO priority N (1-99) for the loop processes (plant, estimator, '
-                   'controller), N-10 for the recorder (N in lockstep); falls back to nice -10 where real-time '
-                   'scheduling is not permitted (default 0: ordinary scheduling); see PERFORMANCE.md')
+                   'controller), N-10 for the recorder (N in lockstep); falls back to nice -10 where '
+                   f'real-time scheduling is not permitted; 0: ordinary scheduling. Default: '
+                   f'{DEFAULT_RT_PRIORITY} in real time where permitted, 0 in lockstep (a lockstep run keeps '
+                   'the CPUs busy: at real-time priority it would starve the machine)')
     p.add_argument('--cpu-latency', type=int, default=None, metavar='US',
                    help='while the stack runs, ask the kernel (PM QoS, /dev/cpu_dma_latency) to keep '
                    'idle CPUs in states that wake within US microseconds; 0 = idle CPUs poll, the '
@@ -177,12 +209,22 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    '(--composed) or recorder, on the CPUs CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
                    '--pin sim=0 --pin estimator=0 --pin controller=1 took 12-57 us off the median '
                    'loop latency of separate processes (PERFORMANCE.md, 20.)')
-    p.add_argument('--composed', nargs='?', const='all', default=None, choices=COMPOSITIONS,
+    p.add_argument('--console', nargs='?', const='8080', default=None, metavar='[LISTEN:]PORT',
+                   help='also run the lab console (./rwpend console: the rig in a browser, and the '
+                   'Foxglove bridge on 8765), on 127.0.0.1:8080 unless given; in lockstep sample 0 waits '
+                   'until its page is open, so the page shows the run from its start')
+    p.add_argument('--composed', nargs='?', const='all', default=None, choices=COMPOSITIONS + ('none',),
                    help='nodes in one process on one executor: "all" (the default of a bare '
                    '--composed): plant (simulator), estimator and controller; "control": estimator '
                    'and controller, the plant (simulator or driver) in its own process, like '
                    'ros2_control separates hardware from controllers. The recorder stays a process '
                    'of its own; see PERFORMANCE.md')
+    p.add_argument('--only', default=None, metavar='PROCESS[,PROCESS...]',
+                   help='run only these processes of the stack, on this host (the others run on other '
+                   'hosts of the network with the same up arguments): sim or driver, estimator, '
+                   'controller, control (--composed control), stack (--composed) or recorder; e.g. '
+                   'the rig PC --only sim, a laptop --only control, a console --only recorder. '
+                   'README, "Lab network"')
 
 
 def usable_cpus() -> set[int]:
@@ -218,14 +260,52 @@ def parse_pins(pins: list[str], processes: list[str]) -> dict[str, str]:
     return out
 
 
+def choose_defaults(a) -> list[str]:
+    """Resolve the defaults of ``up`` that depend on the machine and the plant, in ``a``: the
+    real-time priority (``--rt-priority``: DEFAULT_RT_PRIORITY in real time where permitted, 0 in
+    lockstep) and the layout (``--composed``: DEFAULT_LAYOUT of the plant; ``none`` = separate
+    processes). Returns the lines that say what was chosen and why (printed by ``up``)."""
+    notes = []
+    plant = 'sim' if a.plant == 'sim' else 'serial'
+    if getattr(a, 'composed', None) is True:      # a caller's boolean (the flag before it took a value)
+        a.composed = 'all'
+    given = getattr(a, 'composed', None)
+    layout = given or DEFAULT_LAYOUT[plant]
+    if layout == 'all' and plant != 'sim':
+        layout = 'control' if given is None else layout
+    a.composed = None if layout == 'none' else layout
+    notes.append(f'layout: {LAYOUT_TEXT[layout]}' + ('' if given else f' (the default for --plant {plant}; '
+                                                      '--composed all|control|none to change)'))
+    prio = getattr(a, 'rt_priority', None)
+    if prio is None:
+        if a.lockstep:
+            prio, why = 0, 'lockstep runs at ordinary priority'
+        else:
+            from rwpend_ros.sched import realtime_permitted
+            ok, reason = realtime_permitted(DEFAULT_RT_PRIORITY)
+            prio = DEFAULT_RT_PRIORITY if ok else 0
+            why = ('where permitted (the default; --rt-priority 0 to turn it off)' if ok else
+                   f'not permitted here ({reason}): ordinary scheduling; a busy machine may then miss '
+                   'samples (run as root or set an rtprio limit)')
+        notes.append(f'real-time priority: {prio or "none"} ({why})')
+    a.rt_priority = prio
+    return notes
+
+
+def lockstep_controller_id(ns: str) -> int:
+    """The controller id of ``up --lockstep`` in namespace ``ns``: fixed, non-zero, < 2^63."""
+    import hashlib
+    return int.from_bytes(hashlib.blake2b(ns.encode(), digest_size=8).digest(), 'big') >> 1 | 1
+
+
 def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     """Node specs and params files from the ``up`` arguments; raises ValueError with the reason
-    (also for a bad ``RWPEND_TRANSPORT``, ``RWPEND_HOST_BUS`` or ``RWPEND_RECORDER_FAST_PATH``:
-    refused here, before any process starts)."""
-    from rwpend_ros import hostbus
+    (also for a bad ``RWPEND_TRANSPORT`` or ``RWPEND_INTRA_PROCESS``: refused here, before any
+    process starts). Call :func:`choose_defaults` first."""
+    from rwpend_ros import intra
     from rwpend_ros.transport import transport_choice
     transport_choice()
-    hostbus.recorder_enabled()      # checks RWPEND_HOST_BUS too
+    intra.enabled()
     params: dict[str, dict] = {'sim': {}, 'estimator': {}, 'controller': {}, 'driver': {}}
     rig: dict = {}
     for f in a.params:
@@ -239,12 +319,12 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
             rig['rig.' + name] = value
         else:
             params[node][name] = value
-    check_override_types(a.params, params, rig)
+    model_file, truth = rig_files(a)
+    check_override_types(a.params, params, rig, rig_path=model_file)
     if a.h is not None:
         rig['rig.sample_period'] = float(a.h)
-    if rig:
-        from rwpend_model.rig import load_rig
-        load_rig(overrides=rig)   # validated now, with the reason, before anything starts
+    from rwpend_model.rig import load_rig
+    model = load_rig(model_file, overrides=rig)   # validated now, with the reason, before anything starts
     if a.duration is not None and not (math.isfinite(a.duration) and a.duration > 0):
         raise ValueError(f'--duration must be > 0, got {a.duration}')
     if a.mode:
@@ -270,17 +350,28 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
                     raise ValueError(f'--tap expects T:DV (e.g. 9:0.5), got {t!r}') from None
             params['sim']['taps.times'] = times
             params['sim']['taps.sizes'] = sizes
-        plant_spec = NodeSpec('sim', NODE_MODULES['sim'], {**rig, **params['sim']}, stop_rank=3)
+        # the plant's truth (--plant-rig), then what every node gets, then --set sim.*; the model
+        # the others read goes along for the simulator's report of the difference
+        model_params = {'model_' + k: v for k, v in model.as_params().items()}
+        plant_spec = NodeSpec('sim', NODE_MODULES['sim'], {**truth, **rig, **params['sim'], **model_params},
+                              stop_rank=3)
     elif plant.startswith('serial:') and len(plant) > 7:
-        if a.lockstep or a.tap or a.theta0 is not None:
-            raise ValueError('--lockstep, --tap and --theta0 need the simulator (--plant sim)')
+        if a.lockstep or a.tap or a.theta0 is not None or truth:
+            raise ValueError('--lockstep, --tap, --theta0 and --plant-rig need the simulator (--plant sim); '
+                             "the rig's truth is the rig (the emulator's: ./rwpend emulate --rig FILE)")
         params['driver']['port'] = plant[7:]
+        if a.duration:   # counted by the driver from its first command (the loop closed)
+            params['driver']['duration'] = float(a.duration)
         plant_spec = NodeSpec('driver', NODE_MODULES['driver'], {**rig, **params['driver']}, stop_rank=3)
     else:
         raise ValueError(f"--plant must be 'sim' or 'serial:PORT', got {plant!r}")
     # lockstep: sim time; the estimator and controller take it from the samples' stamps rather
-    # than /clock (rwpend_ros.common.SampleTime: one DDS message less per sample and node)
+    # than /clock (rwpend_ros.simtime.SampleTime: one DDS message less per sample and node)
     sim_time = {'use_sim_time': True, 'time_from_samples': True} if a.lockstep else {}
+    if a.lockstep:
+        # the id in every command (rwpend_ros.claim) fixed, so that a lockstep bag is the same
+        # every run, on one host or several; in real time each controller draws its own
+        params['controller'].setdefault('controller_id', lockstep_controller_id(a.ns))
     specs = [plant_spec,
              NodeSpec('estimator', NODE_MODULES['estimator'], {**rig, **sim_time, **params['estimator']},
                       stop_rank=2)]
@@ -295,10 +386,15 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     if a.record:
         if plant == 'sim':   # the simulator holds sample 0 until the recorder listens
             plant_spec.params.update({'start.encoders_subscribers': 2, 'start.true_state_subscribers': 1})
+        else:                # the driver publishes no sample until the recorder listens
+            n = plant_spec.params.get('start.encoders_subscribers', 1)
+            plant_spec.params['start.encoders_subscribers'] = max(2, n if isinstance(n, int) else 2)
         out = Path(a.record)
-        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        # (with --only and the recorder on another host, the path is that host's)
+        here = getattr(a, 'only', None) is None or 'recorder' in a.only.split(',')
+        if here and out.exists() and (not out.is_dir() or any(out.iterdir())):
             raise ValueError(f'{out} already exists (choose a new bag directory)')
-        if not out.parent.exists():
+        if here and not out.parent.exists():
             raise ValueError(f'{out.parent} does not exist')
         rec_args = ['record', '-o', str(out), '--all']
         if plant == 'sim' and a.lockstep:
@@ -306,10 +402,15 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
             # behind slows the run down rather than losing messages (rwpend_sim.sim_node)
             plant_spec.params.setdefault('lockstep_recorder_window', LOCKSTEP_RECORDER_WINDOW)
             rec_args += ['--progress', a.ns.rstrip('/') + '/recorder/progress']
+        if a.lockstep:
+            # log times on the simulated clock, in a deterministic order (rwpend_bag.logtime)
+            rec_args.append('--sim-time')
         specs.append(NodeSpec('recorder', 'rwpend_bag.cli', args=rec_args, ros_args=False, stop_rank=9))
     composed = getattr(a, 'composed', None)
     if composed is True:      # a caller's boolean (the flag before it took a value)
         composed = 'all'
+    if composed == 'none':
+        composed = None
     if composed:
         if composed not in COMPOSITIONS:
             raise ValueError(f'--composed must be one of {", ".join(COMPOSITIONS)}, got {composed!r}')
@@ -360,8 +461,62 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         for s in specs:
             if s.name == name:
                 s.env['RWPEND_CPUS'] = ids
-    files = [str(rig_file()), str(stack_file()), *map(str, a.params)]
-    return specs, files
+    if getattr(a, 'console', None) is not None:   # not a loop process: its own priority, no pinning
+        specs.append(console_spec(a, plant_spec))
+    files = [str(model_file), str(stack_file()), *map(str, a.params)]
+    return select_part(specs, getattr(a, 'only', None)), files
+
+
+def select_part(specs: list[NodeSpec], only: str | None) -> list[NodeSpec]:
+    """The processes of ``--only`` (comma-separated names of ``specs``), all when None.
+    ValueError for a name the stack has not (its processes listed) or an empty list. Each
+    process keeps the parameters it has in the whole stack (the simulator waits for the
+    subscribers of the other hosts, lockstep nodes take sim time), so every host gives the
+    same ``up`` arguments."""
+    if only is None:
+        return specs
+    names = [n.strip() for n in only.split(',') if n.strip()]
+    known = [s.name for s in specs]
+    bad = [n for n in names if n not in known]
+    if not names or bad:
+        raise ValueError(f'--only: {", ".join(bad) or "no process"}: this stack runs {", ".join(known)} '
+                         '(--composed changes the processes)')
+    return [s for s in specs if s.name in names]
+
+
+def rig_files(a) -> tuple[Path, dict]:
+    """(the rig file every node reads, ``rig.*`` of the plant's own truth or {}) from ``--rig`` and
+    ``--plant-rig``: complete rig files (rwpend_model.rig.load_rig_file), ValueError otherwise."""
+    from rwpend_model.rig import load_rig_file
+    rigs = {}
+    for flag, f in (('--rig', getattr(a, 'rig', None) or rig_file()), ('--plant-rig', getattr(a, 'plant_rig', None))):
+        if f is None:
+            continue
+        if not Path(f).is_file():
+            raise ValueError(f'{flag}: no such file {f}')
+        try:
+            rigs[flag] = load_rig_file(f)
+        except ValueError as exc:
+            raise ValueError(f'{flag}: {exc}') from None
+    truth = rigs['--plant-rig'].as_params() if '--plant-rig' in rigs else {}
+    return Path(getattr(a, 'rig', None) or rig_file()), truth
+
+
+def console_spec(a, plant_spec: NodeSpec) -> NodeSpec:
+    """``up --console``: the lab console as a process of the stack, not of the loop: no pinning,
+    in real time SCHED_FIFO 40 below the loop's priority (under the recorder, above ordinary
+    programs: its e-stop must not wait for the CPU), ordinary priority in lockstep. In lockstep
+    the simulator's sample 0 waits for one more subscriber of ``state``: the console takes state
+    while a page watches the rig, so the run starts when the page is open. ValueError for a bad
+    address."""
+    from rwpend_console.console import parse_console_address
+    listen, port = parse_console_address(a.console)
+    if a.plant == 'sim' and a.lockstep:
+        plant_spec.params['start.state_subscribers'] = plant_spec.params.get('start.state_subscribers', 0) + 1
+    prio = getattr(a, 'rt_priority', 0) or 0
+    return NodeSpec('console', 'rwpend_console.console', args=['--ns', a.ns, '--listen', listen, '--port', str(port)],
+                    ros_args=False, required=a.lockstep, stop_rank=8,
+                    env={'RWPEND_RT_PRIORITY': str(max(1, prio - 40)) if prio and not a.lockstep else '0'})
 
 
 def up_main(argv) -> int:
@@ -370,9 +525,15 @@ def up_main(argv) -> int:
     add_stack_args(p)
     a = p.parse_args(argv)
     try:
+        notes = choose_defaults(a)
         specs, files = build_stack(a, p.prog)
     except ValueError as exc:
         return fail(p.prog, str(exc))
+    for n in notes:
+        print(f'rwpend: {n}', flush=True)
+    if a.console is not None and a.lockstep:
+        print('rwpend: lockstep with --console: the run starts when the console page is open (its '
+              'address follows)', flush=True)
     return run_stack(a, specs, files)
 
 
@@ -388,15 +549,60 @@ def run_stack(a, specs, files, on_started=None) -> int:
         if req.us is not None:
             print(f'rwpend: CPU wake-up latency request: {req.status}', flush=True,
                   file=sys.stdout if req.active else sys.stderr)
-        if a.plant == 'sim':
-            # the simulator exits by itself after --duration s from its sample 0 (simulated time in
-            # lockstep); the wall-clock bound only catches a stack that never starts
-            bound = None if a.duration is None else 120.0 + (20.0 if a.lockstep else 1.5) * a.duration
-            status = launcher.run(bound, on_started=on_started)
-        else:
-            status = launcher.run(a.duration, on_started=on_started)
+        t0 = time.monotonic()
+        # the plant exits by itself after --duration s from its sample 0 (simulated time in
+        # lockstep) or, the driver, from its first command; the wall-clock bound only catches a
+        # stack that never starts
+        bound = None if a.duration is None else 120.0 + (20.0 if a.lockstep else 1.5) * a.duration
+        status = launcher.run(bound, on_started=on_started)
         print(f'rwpend: stopped ({launcher.reason})', flush=True)
+        return judge_run(a, specs, launcher.exit_codes, status, time.monotonic() - t0,
+                         interrupted=launcher.reason == 'signal')
+
+
+def judge_run(a, specs, exit_codes: dict, status: int, wall_s: float, interrupted: bool = False) -> int:
+    """The exit status of ``up``: non-zero, with the reason, when the loop was dead at the end
+    (a node's exit status :data:`rwpend_ros.health.EXIT_LOOP_DEAD`) or the bag is much shorter
+    than the run (:func:`rwpend_bringup.verdict.recording_problems`). A run stopped by a signal
+    (Ctrl-C, ``interrupted``) before its ``--duration`` is expected to hold what the wall time
+    allows in real time, and is not judged by length in lockstep (its simulated length is the
+    plant's, unknown here)."""
+    from .verdict import EXIT_LOOP_DEAD, EXIT_SHORT_BAG, dead_nodes, expected_samples, recording_problems
+    dead = dead_nodes(exit_codes)
+    if dead:
+        print(f'rwpend: FAILED: the loop was dead at the end of the run (reported by {", ".join(dead)}: '
+              'no fresh command for seconds; see its log above)', file=sys.stderr, flush=True)
+        status = EXIT_LOOP_DEAD
+    names = {s.name for s in specs}
+    if not a.record or 'recorder' not in names:
         return status
+    report_file = Path(a.record) / 'recording_report.json'
+    try:
+        report = json.loads(report_file.read_text())
+    except (OSError, ValueError) as exc:
+        print(f'rwpend: FAILED: no recording report in {a.record} ({exc}): the bag may be incomplete',
+              file=sys.stderr, flush=True)
+        return status or EXIT_SHORT_BAG
+    h = next((float(s.params['rig.sample_period']) for s in specs if 'rig.sample_period' in s.params),
+             None) or _rig_sample_period()
+    expected = expected_samples(h, a.duration, a.lockstep, wall_s, interrupted)
+    if not a.duration and not names & {'sim', 'driver', 'stack'}:
+        # a host without the plant (up --only recorder): its own wall time says nothing of the
+        # plant's samples
+        expected = None
+    problems, warnings = recording_problems(report, expected)
+    for w in warnings:
+        print(f'rwpend: warning: the bag is missing messages: {w} (recording_report.json)', flush=True)
+    for p in problems:
+        print(f'rwpend: FAILED: {p} ({report_file})', file=sys.stderr, flush=True)
+    if problems and not status:
+        status = EXIT_SHORT_BAG
+    return status
+
+
+def _rig_sample_period() -> float:
+    from rwpend_model.rig import load_rig
+    return load_rig().sample_period
 
 
 NODE_USAGE = """usage: rwpend node {NODES} [-p NAME:=VALUE ...] [--params FILE ...] [--ns NS] [--ros-args ...]
@@ -521,6 +727,8 @@ def demo_main(argv) -> int:
     add_stack_args(sp)
     ua = sp.parse_args(up_args)
     try:
+        for n in choose_defaults(ua):
+            print(f'rwpend: {n}', flush=True)
         specs, files = build_stack(ua, p.prog)
     except ValueError as exc:
         return fail(p.prog, str(exc))
@@ -548,10 +756,9 @@ def demo_main(argv) -> int:
     if a.realtime:
         why = 'real time (--realtime), like the rig'
     else:
-        why = ('lockstep: deterministic, the same bag every run; on a 2-core VM the real-time '
-               '1 kHz loop of separate processes answered 0-0.26 % of its samples late in 20-60 s runs '
-               'with `up --rt-priority 50 --cpu-latency 0` (more when the host stalls, and without '
-               'those options: PERFORMANCE.md); `--realtime` to try it')
+        why = ('lockstep: deterministic, the same bag every run; `--realtime` runs it on the wall '
+               'clock like the rig (how many samples a machine like ours answers late, per layout: '
+               'PERFORMANCE.md)')
     print(f'rwpend demo: {why}')
     print(f'rwpend demo: {a.duration:g} s simulated in {wall:.1f} s wall\n'
           f'  bag:     {bag}\n  plot:    {plot}\n  metrics: {metrics_file}', flush=True)
@@ -581,11 +788,15 @@ def param_main(argv) -> int:
     s.add_argument('pairs', nargs='+', metavar='NAME VALUE')
     s = sub.add_parser('dump', help='all parameters as a ROS 2 params file')
     s.add_argument('node')
-    s = sub.add_parser('describe', help='descriptions and constraints')
+    s = sub.add_parser('load', help='set the parameters of a ROS 2 params file (e.g. a dump), one by '
+                       'one as `ros2 param load` does; read-only ones with the value they have are left out')
     s.add_argument('node')
-    s.add_argument('names', nargs='+')
+    s.add_argument('file')
+    s = sub.add_parser('describe', help='type, description, range and constraints')
+    s.add_argument('node')
+    s.add_argument('names', nargs='*', help='parameters (default: all)')
     a = p.parse_args(argv)
-    from .rostools import ToolError, format_value, parse_value
+    from .rostools import ToolError, format_descriptor, format_value, parse_value
     if a.cmd == 'set' and len(a.pairs) % 2:
         return fail(p.prog, 'set expects NAME VALUE pairs')
     try:
@@ -598,9 +809,12 @@ def param_main(argv) -> int:
             elif a.cmd == 'dump':
                 print(t.dump(a.node), end='')
             elif a.cmd == 'describe':
-                for d in t.describe(a.node, a.names):
-                    ro = ' (read-only)' if d.read_only else ''
-                    print(f'{d.name}{ro}: {d.description}')
+                names = a.names or t.list_params(a.node)
+                for n, d in zip(names, t.describe(a.node, names)):
+                    d.name = d.name or n
+                    print(format_descriptor(d))
+            elif a.cmd == 'load':
+                return _param_load(t, a.node, a.file, p.prog)
             else:
                 values = {a.pairs[i]: parse_value(a.pairs[i + 1]) for i in range(0, len(a.pairs), 2)}
                 if len(values) > 1:   # a set of gains is validated as a whole: all or nothing
@@ -622,6 +836,25 @@ def param_main(argv) -> int:
     except ToolError as exc:
         return fail(p.prog, str(exc), 1)
     return 0
+
+
+def _param_load(tool, node: str, path: str, prog: str) -> int:
+    """``rwpend param load``: the file's values for the node (its section and ``/**``), set one by
+    one; exit status 1 when one is refused."""
+    from rwpend_model.rig import read_params_file
+    try:
+        values = read_params_file(path, tool.fqn(node))
+    except ValueError as exc:
+        return fail(prog, str(exc))
+    if not values:
+        return fail(prog, f'{path} has no parameters for {tool.fqn(node)}')
+    results, unchanged = tool.load(node, values)
+    bad = [(n, why) for n, ok, why in results if not ok]
+    for n, why in bad:
+        print(f'{n}: refused: {why or "no reason given"}', file=sys.stderr)
+    print(f'loaded {len(results) - len(bad)} of {len(results)} parameters'
+          + (f' ({unchanged} read-only ones unchanged, left out)' if unchanged else ''))
+    return 1 if bad else 0
 
 
 def mode_main(argv) -> int:
@@ -662,10 +895,15 @@ def estop_main(argv) -> int:
                'held at zero whatever the controller sends), or clear it.')
     p.add_argument('--clear', action='store_true')
     p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS)
+    p.add_argument('--timeout', type=float, default=5.0, metavar='S',
+                   help='seconds to find the e-stop services and for each to answer (default 5; '
+                   'discovery on a busy lab network can take longer)')
     a = p.parse_args(argv)
-    from .rostools import ToolError
+    from .rostools import RosTool, ToolError
+    if not a.timeout > 0:
+        return fail(p.prog, f'--timeout must be > 0, got {a.timeout}')
     try:
-        with _tool(a.ns) as t:
+        with RosTool(a.ns, timeout=a.timeout) as t:
             results = t.estop(not a.clear)
     except ToolError as exc:
         return fail(p.prog, str(exc), 1)
@@ -674,6 +912,30 @@ def estop_main(argv) -> int:
         print(f'{name}: {msg}')
         bad += not ok
     return 1 if bad else 0
+
+
+def graph_main(argv) -> int:
+    p = Parser(prog='rwpend graph', description='What this host sees of its ROS domain '
+               '(ROS_DOMAIN_ID, discovery range): every node, the topics it subscribes to and who '
+               'publishes them. Says where a node takes a topic from another namespace (another rig), '
+               '/diagnostics, /parameter_events, /rosout and /clock aside.')
+    p.add_argument('--settle', type=float, default=3.0, help='seconds of discovery first (default 3)')
+    p.add_argument('--json', action='store_true', help='the graph as JSON')
+    a = p.parse_args(argv)
+    from .rostools import RosTool, foreign_publishers
+    with RosTool('/') as t:
+        g = t.graph(a.settle)
+    if a.json:
+        print(json.dumps(g, indent=2, sort_keys=True))
+        return 0
+    for node, info in sorted(g.items()):
+        print(node)
+        for topic, pubs in sorted(info['subscriptions'].items()):
+            print(f'  <- {topic}: {", ".join(pubs) or "no publisher"}')
+    foreign = foreign_publishers(g)
+    print(f'{len(g)} nodes; ' + (f'{len(foreign)} subscription(s) reached from another namespace:\n  '
+                                  + '\n  '.join(foreign) if foreign else 'every node hears its own namespace only'))
+    return 0
 
 
 # ------------------------------------------------------------------ delegated commands
@@ -718,11 +980,37 @@ def bench_main(argv) -> int:
     return main(argv)
 
 
+def soak_main(argv) -> int:
+    from .soak import main
+    return main(argv)
+
+
+def lab_main(argv) -> int:
+    from rwpend_lab.cli import main
+    return main(argv)
+
+
+def identify_main(argv) -> int:
+    from rwpend_ident.cli import main
+    return main(argv)
+
+
+def console_main(argv) -> int:
+    from rwpend_console.console import main
+    return main(argv)
+
+
+def bridge_main(argv) -> int:
+    from rwpend_console.bridge import main
+    return main(argv)
+
+
 COMMANDS = {
     'up': up_main, 'node': node_main, 'sim': sim_main, 'demo': demo_main, 'param': param_main, 'mode': mode_main,
-    'tap': tap_main, 'estop': estop_main, 'gains': gains_main, 'record': record_main,
+    'tap': tap_main, 'estop': estop_main, 'graph': graph_main, 'gains': gains_main, 'record': record_main,
     'play': play_main, 'bag': bag_main, 'analyze': analyze_main, 'emulate': emulate_main,
-    'bench': bench_main,
+    'bench': bench_main, 'soak': soak_main, 'lab': lab_main, 'identify': identify_main,
+    'console': console_main, 'bridge': bridge_main,
 }
 
 

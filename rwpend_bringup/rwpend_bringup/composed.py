@@ -5,8 +5,9 @@ executor.
 
 ``NODE`` is one of :data:`NODES` (default: sim estimator controller). The nodes are the same
 classes the separate processes run; they talk over the same topics (so a recorder in another
-process sees everything), but the messages between them stay inside one DDS participant and one
-executor: no process hop, no context switch between sender and receiver.
+process sees everything), and the loop's messages between them go through the process's
+in-process bus (rwpend_ros.intra, ``RWPEND_INTRA_PROCESS=0`` turns it off): no DDS hop, no
+context switch between sender and receiver.
 
 The ``--ros-args`` apply to every node of the process: the namespace remap, and the params
 files, whose ``/**/<node>`` sections select per node (the launcher writes the overrides of each
@@ -50,11 +51,11 @@ def main(argv=None) -> int:
               f'{" ".join(names)}', file=sys.stderr, flush=True)
         return 2
     ordered = [n for n in NODES if n in names]          # stop order
-    from rwpend_ros.common import run_nodes
+    from rwpend_ros.runner import run_nodes
 
     def factory(name):
         module, cls = NODES[name]
-        return lambda: getattr(importlib.import_module(module), cls)()
+        return lambda bus: getattr(importlib.import_module(module), cls)(bus=bus)
 
     # built plant last, closed in stop order (controller first)
     return run_nodes([factory(n) for n in reversed(ordered)], [sys.argv[0], *ros])

@@ -16,3 +16,33 @@ def test_steal_percent():
 def test_cpu_times_reads_proc_stat():
     t = cpu_times()
     assert t is None or (len(t) >= 4 and all(isinstance(x, int) for x in t))
+
+
+def test_scale_carried_is_the_last_step_within_the_limit():
+    from rwpend_bringup.bench import scale_carried
+    steps = [{'rigs': 1, 'late_fraction': 0.0}, {'rigs': 3, 'late_fraction': 0.002},
+             {'rigs': 2, 'late_fraction': 0.001}]
+    assert scale_carried(steps) == 2                   # 0.1 % itself is within the limit
+    assert scale_carried([{'rigs': 1, 'late_fraction': 0.01}]) == 0
+    assert scale_carried([{'rigs': 1, 'late_fraction': 0.0}, {'rigs': 2, 'late_fraction': None},
+                          {'rigs': 3, 'late_fraction': 0.0}]) == 1     # no figure: failed
+    assert scale_carried([]) == 0
+
+
+def test_scale_step_figures_pool_the_rigs_samples():
+    from rwpend_bringup.bench import scale_step_figures
+    rigs = [{'plant_rx_late_samples': 1, 'plant_traced_samples': 1000, 'plant_rx_late_fraction': 0.001,
+             'plant_latency_us': {'p50': 300.0}},
+            {'plant_rx_late_samples': 5, 'plant_traced_samples': 1000, 'plant_rx_late_fraction': 0.005,
+             'plant_latency_us': {'p50': 500.0}}]
+    f = scale_step_figures(rigs)
+    assert f['late_fraction'] == 6 / 2000 and f['worst_rig_late_fraction'] == 0.005
+    assert f['worst_rig_latency_us'] == {'p50': 500.0}
+    assert scale_step_figures([{'plant_traced_samples': 0}])['late_fraction'] is None
+
+
+def test_window_seqs_from_the_ticks(tmp_path):
+    from rwpend_bringup.bench import window_seqs
+    (tmp_path / 'sim-1.trace').write_text(''.join(f'sim.tick {k} {1000 + 10 * k}\n' for k in range(10)))
+    assert window_seqs(tmp_path, 1020, 1060) == (2, 5)
+    assert window_seqs(tmp_path, 0, 10) is None

@@ -5,7 +5,8 @@ import os
 
 import pytest
 
-from rwpend_bringup.cli import Parser, add_stack_args, build_stack
+from rwpend_bringup import cli
+from rwpend_bringup.cli import Parser, add_stack_args, build_stack, choose_defaults
 
 
 def specs_of(*argv):
@@ -76,8 +77,7 @@ def test_cpu_latency_must_be_an_integer(capsys):
     assert e.value.code == 2 and '--cpu-latency' in capsys.readouterr().err
 
 
-@pytest.mark.parametrize('name, bad', [('RWPEND_TRANSPORT', 'tcp'), ('RWPEND_HOST_BUS', 'off'),
-                                       ('RWPEND_RECORDER_FAST_PATH', 'yes')])
+@pytest.mark.parametrize('name, bad', [('RWPEND_TRANSPORT', 'tcp'), ('RWPEND_INTRA_PROCESS', 'off')])
 def test_bad_environment_switch_refused_before_anything_starts(monkeypatch, name, bad):
     monkeypatch.setenv(name, bad)
     with pytest.raises(ValueError, match=name):
@@ -149,3 +149,133 @@ def test_set_and_params_keep_the_type_of_what_they_override(tmp_path):
     check_override_types([f], {'sim': {'command_timeout_samples': 6}}, {})
     with pytest.raises(ValueError, match='-p lockstep_timeout:'):
         check_override_types([], {'sim': {'lockstep_timeout': [1]}}, {}, flag='-p')
+    # --set controller.mode=off / -p mode:=off: YAML's false, written as the 'off' the node takes
+    params = {'controller': {'mode': False, 'saturation_action': False}}
+    check_override_types([], params, {})
+    assert params == {'controller': {'mode': 'off', 'saturation_action': 'off'}}
+    f.write_text('/**/controller:\n  ros__parameters:\n    mode: off\n')   # a file is not rewritten
+    with pytest.raises(ValueError, match="quote the string, 'off'"):
+        check_override_types([f], {'controller': {}}, {})
+
+
+# ---------------------------------------------------------------- --rig / --plant-rig (plant truth apart from the model)
+def _heavy(tmp_path, m_p=0.25):
+    from rwpend_model.rig import default_rig_file
+    f = tmp_path / 'heavy.yaml'
+    f.write_text(default_rig_file().read_text().replace('m_p: 0.2164', f'm_p: {m_p}'))
+    return f
+
+
+def test_plant_rig_gives_the_simulator_its_own_truth(tmp_path):
+    heavy = _heavy(tmp_path)
+    p = Parser(prog='rwpend up')
+    add_stack_args(p)
+    specs, files = build_stack(p.parse_args(['--plant-rig', str(heavy), '--set', 'rig.g=9.91']), p.prog)
+    s = {x.name: x for x in specs}
+    assert s['sim'].params['rig.m_p'] == 0.25 and s['sim'].params['model_rig.m_p'] == 0.2164
+    assert s['sim'].params['rig.g'] == s['sim'].params['model_rig.g'] == 9.91, '--set rig.* goes to every node'
+    assert 'rig.m_p' not in s['controller'].params and files[0].endswith('rwpend_model/config/rig.yaml')
+
+
+def test_rig_file_is_what_every_node_reads(tmp_path):
+    heavy = _heavy(tmp_path)
+    p = Parser(prog='rwpend up')
+    add_stack_args(p)
+    specs, files = build_stack(p.parse_args(['--rig', str(heavy)]), p.prog)
+    assert files[0] == str(heavy)
+    assert {x.name: x for x in specs}['sim'].params['model_rig.m_p'] == 0.25
+
+
+@pytest.mark.parametrize('args, match', [(['--rig', '/nonexistent.yaml'], '--rig: no such file'),
+                                         (['--plant-rig', 'INCOMPLETE'], '--plant-rig: .*missing rig key'),
+                                         (['--plant-rig', 'HEAVY', '--plant', 'serial:/dev/ttyUSB0'], 'need the simulator')])
+def test_bad_rig_files_refused(tmp_path, args, match):
+    heavy = _heavy(tmp_path)
+    bad = tmp_path / 'incomplete.yaml'
+    bad.write_text('/**:\n  ros__parameters:\n    rig:\n      m_p: 0.3\n')
+    args = [str(heavy) if a == 'HEAVY' else str(bad) if a == 'INCOMPLETE' else a for a in args]
+    with pytest.raises(ValueError, match=match):
+        specs_of(*args)
+
+
+def defaults_of(*argv):
+    p = Parser(prog='rwpend up')
+    add_stack_args(p)
+    a = p.parse_args(list(argv))
+    notes = choose_defaults(a)
+    specs, _ = build_stack(a, p.prog)
+    return a, {s.name: s for s in specs}, notes
+
+
+def test_defaults_real_time_priority_where_permitted_and_the_layout_of_the_plant(monkeypatch):
+    monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
+    a, s, notes = defaults_of('--record', '/tmp/x')
+    assert a.rt_priority == cli.DEFAULT_RT_PRIORITY and s['sim'].env['RWPEND_RT_PRIORITY'] == '50'
+    assert a.composed == cli.DEFAULT_LAYOUT['sim'] and 'control' in s
+    assert any('layout' in n for n in notes) and any('real-time priority: 50' in n for n in notes)
+    monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (False, 'Operation not permitted'))
+    a, s, notes = defaults_of()
+    assert a.rt_priority == 0 and 'RWPEND_RT_PRIORITY' not in s['sim'].env
+    assert any('not permitted here' in n for n in notes)
+
+
+def test_defaults_lockstep_at_ordinary_priority_explicit_choices_kept(monkeypatch):
+    monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
+    a, s, _ = defaults_of('--lockstep')
+    assert a.rt_priority == 0
+    a, s, notes = defaults_of('--rt-priority', '0', '--composed', 'none')
+    assert a.rt_priority == 0 and a.composed is None and {'sim', 'estimator', 'controller'} <= set(s)
+    assert not any('real-time priority' in n for n in notes)
+    a, s, _ = defaults_of('--composed')
+    assert a.composed == 'all' and 'stack' in s
+    a, s, _ = defaults_of('--plant', 'serial:/dev/null')
+    assert a.composed == 'control' and 'driver' in s and 'control' in s
+
+
+def test_realtime_permitted_answers_without_changing_this_thread():
+    import os
+    from rwpend_ros.sched import realtime_permitted
+    before = os.sched_getscheduler(0)
+    ok, why = realtime_permitted(1)
+    assert isinstance(ok, bool) and (ok or why)
+    assert os.sched_getscheduler(0) == before
+
+
+def test_only_runs_a_part_with_the_parameters_of_the_whole_stack():
+    whole = specs_of('--lockstep', '--record', '/tmp/x')
+    part = specs_of('--lockstep', '--record', '/tmp/x', '--only', 'sim')
+    assert list(part) == ['sim'] and part['sim'].params == whole['sim'].params
+    assert part['sim'].params['start.encoders_subscribers'] == 2, 'it waits for the recorder elsewhere'
+    two = specs_of('--composed', 'none', '--only', 'estimator,controller')
+    assert list(two) == ['estimator', 'controller']
+    assert list(specs_of('--composed', 'control', '--only', 'control')) == ['control']
+
+
+@pytest.mark.parametrize('only', ['bogus', 'sim,bogus', '', 'estimator'])
+def test_only_refuses_a_process_the_stack_has_not(only):
+    with pytest.raises(ValueError, match='--only'):
+        specs_of('--composed', 'control', '--only', only)   # the estimator is in 'control'
+
+
+def test_only_without_the_recorder_does_not_look_at_the_bag_path(tmp_path):
+    taken = tmp_path / 'bag'
+    taken.mkdir()
+    (taken / 'x').write_text('taken')
+    assert list(specs_of('--record', str(taken), '--only', 'sim')) == ['sim']
+    with pytest.raises(ValueError, match='already exists'):
+        specs_of('--record', str(taken), '--only', 'recorder')
+
+
+def test_lockstep_gives_the_controller_a_fixed_id():
+    a = specs_of('--lockstep', '--composed', 'none')['controller'].params['controller_id']
+    assert a == specs_of('--lockstep', '--composed', 'none')['controller'].params['controller_id'] > 0
+    assert a < 2**63
+    assert 'controller_id' not in specs_of('--composed', 'none')['controller'].params
+
+
+def test_serial_duration_is_counted_by_the_driver():
+    """With a serial plant --duration is the loop's time (the driver counts it from its first
+    command), not the launcher's wall clock: a slow start-up does not shorten the run."""
+    s = specs_of('--plant', 'serial:/dev/ttyUSB0', '--duration', '14')
+    assert s['driver'].params['duration'] == 14.0 and s['driver'].params['port'] == '/dev/ttyUSB0'
+    assert 'duration' not in specs_of('--plant', 'serial:/dev/ttyUSB0')['driver'].params

@@ -17,6 +17,10 @@ back to the caller and the old values stay -- and applied in the post-set callba
   ``friction_deadband``, ``allow_wheel_drift``.  A gain not given at start is designed from
   the design parameters ``<group>.design.*`` (e.g. ``balance.design.omega0: 1.5wp``); changing
   a design parameter later redesigns its group and updates the gain parameters.
+* ``law.file`` (read-only): a law of one's own for mode ``law`` -- a ``.py`` file or
+  ``package.module:Name`` (:mod:`rwpend_control.user_law`); ``law.params``: a JSON object of
+  values it gets (the lab's designed gains).  A law that cannot be loaded stops the node at start
+  with the reason; one that raises or returns a non-finite u later gives u = 0 and mode off.
 * ``status_every`` (samples, >= 1).
 * safety (:mod:`rwpend_control.safety`): ``state_timeout_samples`` (no new state for this many
   h, + h/2, on the node's clock -- sim time in lockstep -> one zero command answering seq + 1, fault
@@ -24,6 +28,11 @@ back to the caller and the old values stay -- and applied in the post-set callba
   ``wheel_speed_limit`` (rad/s of the motor, below the back-EMF cut-off (2.13)) with
   ``wheel_speed_action`` (brake | off), ``max_saturation_time`` (s) with ``saturation_action``
   (off | swingup | auto).
+
+A state with a new re-synchronisation of the estimator (StateEstimate.resyncs changed) and a
+state stream resuming after stale start the current mode afresh (:mod:`rwpend_control.supervisor`:
+``auto`` swings up again if the pendulum fell, ``balance`` recaptures its wheel reference,
+``wheel_velocity`` resets its integrator), reported as a switch and counted (``fresh_starts``).
 
 Faults never stop the node: a refused state is counted and answered with u = 0 (non-finite or
 implausible) or not at all (out of order); a parameter request that raises is refused with the
@@ -36,12 +45,13 @@ All algorithms live in :mod:`rwpend_control.supervisor`, :mod:`.laws`, :mod:`.de
 from __future__ import annotations
 
 import math
+import secrets
 import struct
 import time
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
@@ -49,14 +59,19 @@ from rclpy.qos import QoSProfile
 from rwpend_msgs.msg import ControllerStatus, MotorCommand, StateEstimate
 from rwpend_msgs.srv import SetMode
 from rwpend_ros import wire
+from rwpend_ros.claim import format_id
 from rwpend_ros.trace import tracer
-from rwpend_ros.common import (QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher,
-                               RwNode, SlackTimer, declare_rig, fast_path_values, local_subscription,
-                               publish_diagnostic, run_node, sample_time)
+from rwpend_ros.diagnostics import publish_diagnostic
+from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, local_subscription
+from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
+from rwpend_ros.paramspec import ParamSpec
+from rwpend_ros.qos import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS
+from rwpend_ros.runner import run_node
+from rwpend_ros.simtime import sample_time
+from rwpend_control.parameters import DESIGNED, controller_specs
+from rwpend_control.user_law import LawError, load_law
 from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
-
-DESIGNED_PARAMS = {p for names in DESIGN_GROUPS.values() for p in names}
 #: Period of the stale-state check (s, steady clock): the controller notices a silent state
 #: stream within state_timeout_samples h + this.  The plant's own command timeout zeros the
 #: motor within its timeout regardless.
@@ -69,34 +84,23 @@ def _time_msg(t: float) -> Time:
 
 
 class ControllerNode(RwNode):
-    def __init__(self, **node_kwargs) -> None:
-        """node_kwargs go to rclpy Node (context, parameter_overrides, namespace) for tests."""
-        super().__init__('controller', **node_kwargs)
-        self.rig = declare_rig(self)
-        self.sample_time = sample_time(self)   # lockstep: ROS time from the samples' stamps
-        dyn = dict(dynamic_typing=True)
-        self.declare_parameter('mode', 'off', ParameterDescriptor(
-            description='operating mode: ' + ', '.join(MODES), **dyn))
-        self.declare_parameter('status_every', 10, ParameterDescriptor(
-            description='publish controller/status every N state samples (and on every switch)', **dyn))
-        self.declare_parameter('state_queue_depth', QOS_CONTROL_LATEST.depth, ParameterDescriptor(
-            description='depth of the state subscription: a controller that fell behind acts on the '
-            'newest of these and drops older states (set at start; 1..10000)', read_only=True))
-        for name, default in DESIGN_DEFAULTS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(
-                description='design parameter, used when the gains are not given', **dyn))
-        defaults = ControllerConfig()
-        for pname, fname in PARAM_FIELDS.items():
-            default = None if pname in DESIGNED_PARAMS else getattr(defaults, fname)
-            self.declare_parameter(pname, default, ParameterDescriptor(description=pname, **dyn))
-
+    def __init__(self, bus=None, **node_kwargs) -> None:
+        """``bus``: the in-process bus of a composed process (rwpend_ros.intra); node_kwargs go
+        to rclpy Node (context, parameter_overrides, namespace) for tests."""
+        super().__init__('controller', bus=bus, **node_kwargs)
+        self.param_table = ParameterTable(self)
+        self.rig = declare_rig(self.param_table)
+        self.sample_time = sample_time(self, self.param_table)   # lockstep: ROS time from the samples' stamps
+        p = self.param_table.declare(controller_specs(self.rig, QOS_CONTROL_LATEST.depth))
         # gains not given -> designed from the design parameters
-        values = {p: self.get_parameter(p).value for p in PARAM_FIELDS}
-        designs = {n: self.get_parameter(n).value for n in DESIGN_DEFAULTS}
+        values = {n: p[n] for n in PARAM_FIELDS}
+        #: the design parameters the gains were designed from (a group is redesigned when one
+        #: of its design parameters changes value)
+        self.designs = {n: p[n] for n in DESIGN_DEFAULTS}
         for group, names in DESIGN_GROUPS.items():
             if any(values[n] is None for n in names):
                 try:
-                    designed = gains_from_design(self.rig, group, self._spec(group, designs))
+                    designed = gains_from_design(self.rig, group, self._spec(group, self.designs))
                 except (ValueError, TypeError, KeyError, ArithmeticError) as exc:
                     raise ConfigError(f'{group} design: {exc}') from exc
                 for n in names:
@@ -109,14 +113,16 @@ class ControllerNode(RwNode):
         ok, reason, cfg = self.ctrl.check_params(values)
         if not ok:
             raise ConfigError(f'controller parameters: {reason}')
-        self.ctrl = Controller(self.rig, cfg)
-        self.set_parameters([Parameter(n, value=values[n]) for n in DESIGNED_PARAMS])
-        self.status_every = self._status_every(self.get_parameter('status_every').value)
-        mode = self.get_parameter('mode').value
-        ok, msg = self.ctrl.set_mode(mode) if isinstance(mode, str) else (False, f'mode must be a string, got {mode!r}')
+        self.ctrl = Controller(self.rig, cfg, user_law=self._load_user_law())
+        for r in self.set_parameters([Parameter(n, value=float(values[n])) for n in sorted(DESIGNED)]):
+            if not r.successful:
+                raise ConfigError(f'designed gains: {r.reason}')
+        self.status_every = p['status_every']
+        ok, msg = self.ctrl.set_mode(p['mode'])
         if not ok:
             raise ConfigError(msg)
 
+        self.controller_id = self._controller_id(p['controller_id'])
         self.samples = 0
         self.malformed_states = 0    # states whose bytes do not decode (refused, not answered)
         self._last_header = wire.pack_header(0, 0, '')   # of the newest state (frame_id of a stale command)
@@ -133,15 +139,11 @@ class ControllerNode(RwNode):
         self.add_post_set_parameters_callback(self.on_parameters_set)
         # command reaches a simulator in this process directly (composed mode, rwpend_ros.intra)
         self.pub_cmd = LocalPublisher(self, MotorCommand, 'command', QOS_CONTROL_PUB)
-        # status too: a recorder on this host takes it through the fast path (its DDS copy would
-        # wake the recorder's executor every 10 samples: PERFORMANCE.md, 17.)
-        self.pub_status = LocalPublisher(self, ControllerStatus, 'controller/status', QOS_STATUS)
+        self.pub_status = self.create_publisher(ControllerStatus, 'controller/status', QOS_STATUS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        depth = self.get_parameter('state_queue_depth').value
-        if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= 10000:
-            raise ConfigError(f'state_queue_depth must be an integer in 1..10000, got {depth!r}')
+        depth = p['state_queue_depth']
         # also taken directly from an estimator in this process (composed mode, rwpend_ros.intra)
-        local_subscription(self, StateEstimate, 'state', self.on_state,
+        self.sub_state = local_subscription(self, StateEstimate, 'state', self.on_state,
                            QoSProfile(reliability=QOS_CONTROL_LATEST.reliability,
                                       history=QOS_CONTROL_LATEST.history, depth=depth,
                                       durability=QOS_CONTROL_LATEST.durability))
@@ -158,26 +160,49 @@ class ControllerNode(RwNode):
         self.get_logger().info(
             f'mode {self.ctrl.mode}; balance ({c.balance_kpp:.4g}, {c.balance_kdp:.4g}, {c.balance_kpr:.4g}, '
             f'{c.balance_kdr:.4g}); patch ({c.patch_kpp:.4g}, {c.patch_kdp:.4g}, {c.patch_kdr:.4g}); '
-            f'swingup c_e={c.swingup_c_e:.4g} c_v={c.swingup_c_v:.4g}; friction {c.friction_compensation}')
+            f'swingup c_e={c.swingup_c_e:.4g} c_v={c.swingup_c_v:.4g}; friction {c.friction_compensation}; '
+            f'controller id {format_id(self.controller_id)}')
 
     # ------------------------------------------------------------ parameters
+    @staticmethod
+    def _controller_id(value) -> int:
+        """The ``controller_id`` parameter, or a random non-zero id for 0."""
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**63:
+            raise ConfigError(f'controller_id must be an integer in 0..2^63-1, got {value!r}')
+        return value or secrets.randbits(63) | 1
+
+    def _load_user_law(self):
+        """The law of mode ``law`` from ``law.file`` / ``law.params`` (None when no file)."""
+        v = self.param_table.declare([
+            ParamSpec('law.file', '', "a law of one's own for mode 'law': a .py file or "
+                      'package.module:Name (rwpend_control.user_law); empty: none', read_only=True),
+            # default '' (= no values), not '{}': ros2cli's `param load` reads a dumped '{}' as a
+            # YAML mapping and cannot build the request (rclpy: "bad argument type")
+            ParamSpec('law.params', '', 'a JSON object of the values the law gets (empty: none)',
+                      read_only=True)])
+        source, params = v['law.file'], v['law.params']
+        if not source:
+            return None
+        try:
+            law = load_law(str(source), str(params), self.rig)
+        except LawError as exc:
+            raise ConfigError(str(exc)) from exc
+        self.get_logger().info(f'law: {law.name} of {source}')
+        return law
+
     def _spec(self, group: str, designs: dict) -> dict:
         prefix = f'{group}.design.'
         return {k[len(prefix):]: v for k, v in designs.items() if k.startswith(prefix)}
-
-    @staticmethod
-    def _status_every(v) -> int:
-        if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 1_000_000:
-            raise ConfigError(f'status_every must be an integer >= 1, got {v!r}')
-        return v
 
     def _candidate(self, params) -> tuple[dict, list[str]]:
         """Controller values implied by ``params`` (explicit gains win over redesigned ones)."""
         changes = {p.name: p.value for p in params}
         values = {n: v for n, v in changes.items() if n in PARAM_FIELDS}
-        groups = {design_group(n) for n in changes} - {None}
-        designs = {n: self.get_parameter(n).value for n in DESIGN_DEFAULTS}
-        designs.update({n: v for n, v in changes.items() if n in DESIGN_DEFAULTS})
+        # a design parameter set to the value it has changes nothing (ros2 param load of a dump
+        # sets every parameter: the gains it holds, tuned or not, stay as they are)
+        redesign = {n: v for n, v in changes.items() if n in DESIGN_DEFAULTS and v != self.designs[n]}
+        groups = {design_group(n) for n in redesign}
+        designs = {**self.designs, **redesign}
         errors = []
         for group in sorted(groups):
             try:
@@ -208,11 +233,6 @@ class ControllerNode(RwNode):
         for p in params:
             if p.name.startswith('rig.'):
                 reasons.append(f'{p.name} is read-only')
-            elif p.name == 'status_every':
-                try:
-                    self._status_every(p.value)
-                except ConfigError as exc:
-                    reasons.append(str(exc))
             elif p.name == 'mode':
                 ok, why = self._mode_possible(p.value)
                 if not ok:
@@ -238,16 +258,19 @@ class ControllerNode(RwNode):
         """Apply accepted values."""
         if self._syncing:
             return
+        explicit = {p.name for p in params}
+        # a value set now wins over one a redesign or a switch scheduled before
+        self._pending_params = [p for p in self._pending_params if p.name not in explicit]
         for p in params:
             if p.name == 'status_every':
                 self.status_every = int(p.value)
         values, errors = self._candidate(params)
+        self.designs.update({p.name: p.value for p in params if p.name in DESIGN_DEFAULTS})
         if values and not errors:
             ok, why = self.ctrl.set_params(values)
             if not ok:  # pragma: no cover - validated in on_set_parameters
                 self.get_logger().error(f'parameters not applied: {why}')
             # redesigned gains: show them in the gain parameters too
-            explicit = {p.name for p in params}
             sync = [Parameter(n, value=v) for n, v in values.items() if n not in explicit]
             if sync:
                 self._schedule_sync(sync)
@@ -286,7 +309,8 @@ class ControllerNode(RwNode):
         now_t = self.get_clock().now()
         now = now_t.nanoseconds * 1e-9
         try:
-            header, seq, theta, theta_dot, wheel_angle, wheel_rate, friction, _ = wire.unpack_state(data)
+            header, seq, theta, theta_dot, wheel_angle, wheel_rate, friction, _, resyncs, _ = \
+                wire.unpack_state(data)
         except (struct.error, IndexError) as exc:   # truncated bytes: counted, not answered
             self.malformed_states += 1
             self.get_logger().warn(f'malformed state refused: {exc}', throttle_duration_sec=1.0)
@@ -300,7 +324,8 @@ class ControllerNode(RwNode):
             header = wire.pack_header(sec, nanosec, wire.header_frame_id(header))
         t = sec + nanosec * 1e-9
         try:
-            u, st = self.ctrl.update(t, seq, theta, theta_dot, wheel_angle, wheel_rate, friction, now=now)
+            u, st = self.ctrl.update(t, seq, theta, theta_dot, wheel_angle, wheel_rate, friction, now=now,
+                                     resyncs=resyncs)
         except Exception as exc:  # noqa: BLE001 - a fault in a law: zero torque, reported
             self.law_errors += 1
             u, st = 0.0, Status(t=t, seq=seq, mode=self.ctrl.mode, law=self.ctrl.law,
@@ -317,7 +342,7 @@ class ControllerNode(RwNode):
             self.get_logger().info(st.note, throttle_duration_sec=1.0)
         if self.trace is not None:
             self.trace('ctl.pub', seq)
-        self.pub_cmd.publish(wire.pack_command(header, seq, u))
+        self.pub_cmd.publish(wire.pack_command(header, seq, u, self.controller_id))
         self.samples += 1
         self.diag_timer.sample_done()
         self._since_status += 1
@@ -335,6 +360,9 @@ class ControllerNode(RwNode):
             # one call site per severity: rclpy refuses a severity change at a call site
             if ev.reason.startswith(('overspeed', 'saturated', 'fell')):
                 self.get_logger().warn(f'safety switch {ev.from_} -> {ev.to}: {ev.reason}')
+            elif ev.from_ == ev.to:      # a fresh start of the same law: every stale episode
+                self.get_logger().info(f'switch {ev.from_} -> {ev.to}: {ev.reason}',
+                                       throttle_duration_sec=1.0)
             else:
                 self.get_logger().info(f'switch {ev.from_} -> {ev.to}: {ev.reason}')
             if self.get_parameter('mode').value != self.ctrl.mode:
@@ -355,6 +383,7 @@ class ControllerNode(RwNode):
         c.header.frame_id = wire.header_frame_id(self._last_header)
         c.seq = st.seq
         c.u = 0.0
+        c.controller_id = self.controller_id
         self.pub_cmd.publish(c)
         self.stale_fault = st.fault
         self.last_status = st
@@ -414,11 +443,32 @@ class ControllerNode(RwNode):
                 'stale_episodes': wd.episodes, 'state_gaps': wd.gaps, 'state_restarts': wd.restarts,
                 'last_state_seq': wd.last_seq, 'overspeed_trips': ctrl.overspeed_trips,
                 'saturation_trips': ctrl.saturation_trips, 'fall_trips': ctrl.fall_trips,
+                'fresh_starts': ctrl.fresh_starts,
+                'estimator_resyncs': '' if ctrl.estimator_resyncs is None else ctrl.estimator_resyncs,
                 'law_errors': self.law_errors, 'param_errors': self.param_errors,
                 'malformed_states': self.malformed_states,
                 'friction_compensation': self.ctrl.config.friction_compensation,
-                **fast_path_values(self),
+                'state_order': self.sub_state.summary(),
+                'controller_id': format_id(self.controller_id),
             })
+
+    def close(self) -> None:
+        """Stopping: give the rig up (rwpend_ros.claim) with a last command, u = 0, answering
+        the sample after the newest state and flagged ``release``, so that another controller
+        may take over at once instead of after the plant's command timeout (not in lockstep)."""
+        seq = self.ctrl.watchdog.last_seq
+        if seq is None or seq < 0:
+            return
+        if self.get_parameter('use_sim_time').value:
+            # lockstep: the run ends with the simulator, there is no rig to hand over, and a
+            # release after the last sample would make the bag depend on the order of the stop
+            return
+        sec, nanosec = wire.header_stamp(self._last_header)
+        header = wire.pack_header(sec, nanosec, wire.header_frame_id(self._last_header))
+        try:
+            self.pub_cmd.publish(wire.pack_command(header, seq + 1, 0.0, self.controller_id, release=True))
+        except Exception:  # noqa: BLE001 - the context may be gone already (the plant's timeout covers it)
+            pass
 
 
 def main(args=None) -> int:

@@ -6,7 +6,9 @@
 
 DESIGN: pd (4.3), pi (3.15-3.16), wheel_pd (3.18), pdd (4.11), pdpd (4.15), patch (6.3).
 ``--book-g`` uses the book's g = 9.91 (reproduces its printed numbers, ERRATA E01); otherwise
-the rig YAML (or ``--rig FILE``).  The printed parameter names are those of the ``controller``
+the shipped rig YAML, or ``--rig FILE`` (a complete rig file, e.g. an identified ``DIR/rig.yaml``:
+every key, named in the error when one is missing).  The gains printed without options are the
+controller's default gain sets for that rig (``ControllerConfig.designed``).  The printed parameter names are those of the ``controller``
 node; ``--apply`` sets them on the running controller (all in one atomic request, validated
 by the node: refused as a whole, with the reason, if invalid).  Exit status 2 on bad arguments,
 1 when the controller refuses or cannot be reached.
@@ -19,7 +21,7 @@ import sys
 
 import numpy as np
 
-from rwpend_model.rig import book_rig, load_rig
+from rwpend_model.rig import book_rig, load_rig, load_rig_file
 
 from . import design
 
@@ -51,7 +53,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--zeta2', type=float, default=1.0, help='pdpd: zeta2 (default 1)')
     p.add_argument('--down', action='store_true', help='pd: also print the up-down transformed gains (E21)')
     p.add_argument('--book-g', action='store_true', help="use the book's g = 9.91 (E01)")
-    p.add_argument('--rig', help='rig parameters YAML (default: the shipped rig.yaml)')
+    p.add_argument('--rig', help='a complete rig YAML, e.g. an identified DIR/rig.yaml (default: the shipped rig.yaml)')
     p.add_argument('--json', action='store_true', help='print JSON')
     p.add_argument('--apply', action='store_true',
                    help='set the gains on the running controller (validated there; refused as a whole)')
@@ -65,7 +67,12 @@ def _poles_list(poles) -> list:
 
 def compute(args: argparse.Namespace) -> dict:
     """The design result as a dict (raises ValueError for bad values)."""
-    rig = book_rig() if args.book_g else load_rig(args.rig)
+    if args.book_g and args.rig:
+        raise ValueError("--book-g is the book's rig: it excludes --rig")
+    try:
+        rig = book_rig() if args.book_g else load_rig_file(args.rig) if args.rig else load_rig()
+    except OSError as exc:
+        raise ValueError(f'--rig: {exc}') from None
     w0_text, zeta_default = DEFAULTS[args.design]
     w0_text = args.w0 if args.w0 is not None else w0_text
     zeta = args.zeta if args.zeta is not None else zeta_default

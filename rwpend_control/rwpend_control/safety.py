@@ -9,7 +9,8 @@ Stale state (a dead or silent estimator, lost messages)
     simulator is not a fault), the state is stale: the controller commands u = 0 once (as the
     answer to the next sample, seq + 1, so the plant applies it) and reports why; the plant's
     own command timeout keeps the motor at zero afterwards.  The first fresh state clears the
-    fault and the configured mode carries on (``auto`` swings up again if the pendulum fell).
+    fault and starts the configured mode afresh from the state (supervisor: ``auto`` swings
+    up again if the pendulum fell, ``balance`` recaptures its wheel reference).
     A state whose seq does not increase is refused (out of order, duplicate) -- unless the
     stream was silent for longer than the timeout first, which is a restart (e.g. a restarted
     simulator starts again at seq 0).  The silence counts from the arrival of the last state on
@@ -25,7 +26,9 @@ Wheel-speed limit
     and above the 610 rad/s the energy swing-up (6.1) reaches with the designed gains) is
     checked on w = theta_r' - theta' (the motor speed of (2.13)).  Above it the controller goes
     to mode ``off`` and either brakes the wheel (law ``brake``: the P wheel-speed law (3.13)
-    with reference 0 on w, until |w| < :data:`BRAKE_DONE_SPEED`) or applies u = 0.
+    with reference 0 on w, until |w| < :data:`BRAKE_DONE_SPEED`) or applies u = 0.  In mode
+    ``auto`` it stays in ``auto`` (law ``brake`` or ``off``) and, once |w| < BRAKE_DONE_SPEED,
+    swings up again: an overspeed costs a swing-up, never the loop.
 
 Saturation in balance (Sections 4.3, 6.3)
     The linear balance design assumes |u| < u_max; a balance loop saturated for long has lost
@@ -81,6 +84,7 @@ class StateWatchdog:
         self.last_arrival: float | None = None   # controller's clock at the last accepted state
         self.last_time: float | None = None      # the later of that and the state's stamp
         self.stale = False
+        self.resumed_after = 0.0
         self.episodes = 0        # times the stream went stale (seen by check())
         self.gaps = 0            # arrivals after a silence longer than the timeout
         self.restarts = 0        # seq went back after a silence: accepted as a restart
@@ -106,6 +110,8 @@ class StateWatchdog:
             note = f'state seq restarted at {seq} (was {self.last_seq})'
         if silent and gap > 0:
             self.gaps += 1
+        #: s the stream was silent before this state, when it had gone stale (else 0)
+        self.resumed_after = gap if self.stale else 0.0
         if self.stale:
             note = note or f'state resumed after {gap * 1e3:.1f} ms'
         self.stale = False

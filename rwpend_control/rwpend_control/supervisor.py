@@ -9,6 +9,9 @@ Modes:
   wheel-angle reference taken at the moment balance starts).  Falling beyond theta_0 turns the
   controller ``off`` (the pendulum cannot be caught again without a swing-up).
 * ``swingup``: energy control (6.1)/(6.2) with the signs of ERRATA E35 only (no catch).
+* ``law``: a law of one's own (:mod:`rwpend_control.user_law`, the lab's ``--law FILE.py``), given
+  to the Controller at construction; an exception or a non-finite output turns the controller
+  ``off`` with the reason (u = 0 on that sample, the fault in the status).
 * ``auto``: Section 6: law ``swingup`` until |wrap(theta - pi)| < theta_s (6.5) (and, if
   ``catch_region``, the state is inside the region (6.6)); then law ``catch`` = the patched
   stabilizer ``patch.*`` (Section 6.3, E39); back to ``swingup`` when |wrap(theta - pi)| > theta_0.
@@ -21,19 +24,46 @@ points inwards) and the velocity noise of a one-count jump never chatter across 
 The default theta_0 = 0.8 rad gives 0.3 rad of hysteresis; a falling pendulum reaches it about
 0.1 s after leaving theta_s, before the swing-up has lost anything.
 
-Every change of mode or law is a :class:`SwitchEvent` (t, from, to, reason).
+Every change of mode or law, and every fresh start of one, is a :class:`SwitchEvent`
+(t, from, to, reason).
+
+Fresh start (issue 21: gaps are survived).  A state estimate with a new re-synchronisation of
+the estimator (``StateEstimate.resyncs`` changed: its state was re-initialised from the counts
+after a long gap, a plant restart or refused samples) and a state stream that resumes after it
+was stale for :data:`FRESH_START_GAP` (50 ms) or more (or restarts its seq) start the current
+mode afresh (a shorter stale episode is answered with u = 0 and the law goes on), as if it had just been set, from
+the state now -- not from what the controller remembers of the state before the gap:
+
+* ``auto`` picks its law from the state: ``catch`` inside theta_s (6.5) (and the region (6.6)
+  with ``catch_region``), else ``swingup`` -- so a pendulum that fell during the gap is swung
+  up again; a wheel being stopped after an overspeed goes on being stopped;
+* ``balance`` recaptures its wheel-angle reference (4.13)/E28 at the current wheel angle, or
+  goes ``off`` with the reason "fell: ..." beyond theta_0;
+* ``wheel_velocity`` resets the integrator of its PI law (3.14) (E15);
+* ``swingup`` and ``wheel_angle`` carry no memory; the event is reported all the same.
+* ``law`` (a law of one's own, :mod:`rwpend_control.user_law`) keeps whatever memory it has;
+  the event is reported all the same.
+
+Each fresh start is a SwitchEvent with the reason "fresh start of MODE: why" (in
+controller/status and the log) and is counted (``fresh_starts``, /diagnostics); ``off`` has
+nothing to start.
 
 Safety (:mod:`rwpend_control.safety`; every transition is a SwitchEvent or a ``fault``, so it
 shows in ControllerStatus and /diagnostics):
 
 * stale state: no new state for ``state_timeout_samples`` h on the controller's clock -> u = 0
   once (answering seq + 1) and ``fault`` "stale state: ..." (:meth:`Controller.check_stale`,
-  called by the node's timer); the first fresh state clears it and the mode carries on.
+  called by the node's timer); the first fresh state clears it and starts the mode afresh
+  (Fresh start, above).
   States with a seq that does not increase are refused (not answered, counted).
 * bad state (non-finite or implausible fields): refused, counted, u = 0 for that sample (it
   does not count as a fresh state for the watchdog).
 * wheel faster than ``wheel_speed_limit`` (motor speed, below the cut-off of (2.13)) in any
-  mode but ``off`` -> mode ``off``, law ``brake`` (or ``off``), reason "overspeed: ...".
+  mode but ``off`` -> mode ``off``, law ``brake`` (or ``off``), reason "overspeed: ...";
+  in ``auto`` the mode stays ``auto``: law ``brake`` (or ``off``: u = 0, the wheel coasts)
+  until |w| < BRAKE_DONE_SPEED, then a fresh law from the state (swing-up, or catch if
+  inside theta_s), reason "wheel stopped: ...".  ``auto`` never ends by itself: a fall swings
+  up again, an overspeed brakes and swings up again, a gap starts it afresh.
 * ``balance`` saturated for longer than ``max_saturation_time`` -> ``saturation_action``
   (off, swingup or auto), reason "saturated: ...".
 * ``balance`` with the pendulum beyond theta_0 (out of the region where it can be caught)
@@ -50,11 +80,15 @@ from . import design
 from .design import Gains
 from .laws import (FRICTION_MODES, Balance, EnergySwingUp, FrictionCompensation, WheelAnglePD,
                    WheelVelocityPI, upright_deviation)
+from .user_law import LawError, LawState
 from .safety import (BRAKE_DONE_SPEED, SATURATION_ACTIONS, WHEEL_SPEED_ACTIONS, StateWatchdog, brake,
                      motor_speed)
 
-MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto')
-LAWS = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'catch', 'brake')
+#: s of silence of the state stream after which its return starts the mode afresh (module doc);
+#: shorter stale episodes are answered with u = 0 and the law goes on
+FRESH_START_GAP = 0.05
+MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto', 'law')
+LAWS = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'catch', 'brake', 'law')
 
 #: Limits of a sane state estimate; beyond them the sample is refused (u = 0, fault).
 MAX_THETA_DOT = 200.0       # rad/s (a fall from upright reaches 2 omega_p = 18 rad/s)
@@ -261,6 +295,41 @@ def gains_from_design(rig, group: str, spec: Mapping[str, Any]) -> dict[str, flo
     raise ValueError(f'unknown design group {group!r}')
 
 
+def param_limits(rig) -> dict[str, tuple[float, float]]:
+    """[low, high] (inclusive) of each numeric controller parameter for ``rig``; validate_config
+    refuses values outside (wheel_speed_limit, below the cut-off, is judged there on its own).
+
+    The wheel loops' gains: lumped lag T_e = motor lag + h/2 (Section 3.5); kdr b_r T_e <= 1
+    (E14: the sampled loop goes unstable a few times above).
+    """
+    t_e = rig.motor_time_constant + 0.5 * rig.sample_period
+    kd_max = 1.0 / (rig.b_r * t_e)
+    limits = {}
+    for g in ('balance', 'patch'):
+        limits[f'{g}.kpp'] = (-1e4, 1e4)
+        limits[f'{g}.kdp'] = (-1e3, 1e3)
+        limits[f'{g}.kdr'] = (-100.0, 100.0)
+    limits.update({
+        'balance.kpr': (-100.0, 100.0),
+        'balance.rate_ref': (-rig.omega_max, rig.omega_max),
+        'swingup.c_e': (0.0, 1e8),
+        'swingup.c_v': (0.0, 100.0),
+        'swingup.kick': (0.0, rig.u_max),
+        'wheel.kp': (0.0, kd_max),
+        'wheel.ki': (0.0, 1.0),
+        'wheel.ref': (-0.9 * rig.omega_max, 0.9 * rig.omega_max),
+        'wheel_angle.kpr': (0.0, 100.0),
+        'wheel_angle.kdr': (0.0, kd_max),
+        'wheel_angle.ref': (-MAX_ANGLE, MAX_ANGLE),
+        'theta_s': (1e-3, math.pi),
+        'theta_0': (1e-3, math.pi),
+        'friction_deadband': (0.0, 100.0),
+        'state_timeout_samples': (1, 1000),
+        'max_saturation_time': (rig.sample_period, 60.0),
+    })
+    return limits
+
+
 def validate_config(cfg: ControllerConfig, rig) -> list[str]:
     """Reasons why ``cfg`` is unacceptable for ``rig`` (empty when fine)."""
     errors: list[str] = []
@@ -284,40 +353,16 @@ def validate_config(cfg: ControllerConfig, rig) -> list[str]:
     if errors:
         return errors
 
-    def rng(name: str, lo: float, hi: float) -> None:
-        v = getattr(cfg, name)
+    for pname, (lo, hi) in param_limits(rig).items():
+        v = getattr(cfg, PARAM_FIELDS[pname])
         if not lo <= v <= hi:
-            errors.append(f'{p[name]} = {v:g} out of range [{lo:g}, {hi:g}]')
-
-    for g in ('balance', 'patch'):
-        rng(f'{g}_kpp', -1e4, 1e4)
-        rng(f'{g}_kdp', -1e3, 1e3)
-        rng(f'{g}_kdr', -100.0, 100.0)
-    rng('balance_kpr', -100.0, 100.0)
-    rng('balance_rate_ref', -rig.omega_max, rig.omega_max)
-    rng('swingup_c_e', 0.0, 1e8)
-    rng('swingup_c_v', 0.0, 100.0)
-    rng('swingup_kick', 0.0, rig.u_max)
-    # wheel loops: lumped lag T_e = motor lag + h/2 (Section 3.5); refuse zeta < 0.5 of the
-    # P loop, kdr b_r T_e > 1 (E14: the sampled loop goes unstable a few times above)
+            errors.append(f'{pname} = {v:g} out of range [{lo:g}, {hi:g}]')
     t_e = rig.motor_time_constant + 0.5 * rig.sample_period
-    kd_max = 1.0 / (rig.b_r * t_e)
-    rng('wheel_kp', 0.0, kd_max)
-    rng('wheel_ki', 0.0, 1.0)
-    rng('wheel_ref', -0.9 * rig.omega_max, 0.9 * rig.omega_max)
-    rng('wheel_angle_kpr', 0.0, 100.0)
-    rng('wheel_angle_kdr', 0.0, kd_max)
-    rng('wheel_angle_ref', -MAX_ANGLE, MAX_ANGLE)
-    rng('theta_s', 1e-3, math.pi)
-    rng('theta_0', 1e-3, math.pi)
-    rng('friction_deadband', 0.0, 100.0)
-    rng('state_timeout_samples', 1, 1000)
     # below the back-EMF cut-off omega_max = V_max/k_m (2.13), beyond which no braking torque
     # along the motion can be produced any more
     if not 1.0 <= cfg.wheel_speed_limit < rig.omega_max:
         errors.append(f'wheel_speed_limit = {cfg.wheel_speed_limit:g} rad/s must be in [1, '
                       f'{rig.omega_max:.1f}) (below the back-EMF cut-off V_max/k_m, (2.13))')
-    rng('max_saturation_time', rig.sample_period, 60.0)
     if errors:
         return errors
     if abs(cfg.wheel_ref) >= cfg.wheel_speed_limit:
@@ -366,7 +411,12 @@ class Controller:
     """
 
     def __init__(self, rig, config: ControllerConfig | None = None, mode: str = 'off',
-                 max_events: int = 200) -> None:
+                 max_events: int = 200, user_law=None) -> None:
+        """``user_law``: the law of mode ``law`` (a :class:`rwpend_control.user_law.UserLaw`)."""
+        self.user_law = user_law
+        self._law_t0: float | None = None     # state time when mode law started
+        self._law_fault = ''
+        self._friction_in = 0.0               # the state's friction estimate (for the law)
         self.rig = rig
         self.u_max = float(rig.u_max)
         self.omega_p = rig.omega_p
@@ -389,6 +439,8 @@ class Controller:
         self.overspeed_trips = 0
         self.saturation_trips = 0
         self.fall_trips = 0
+        self.fresh_starts = 0
+        self._resyncs: int | None = None           # the estimator's resyncs of the last state
         self.events: deque[SwitchEvent] = deque(maxlen=max_events)
         self._pending: SwitchEvent | None = None
         self._last_x: float | None = None          # last upright deviation seen
@@ -470,6 +522,10 @@ class Controller:
         if mode == self.mode and not (mode == 'off' and self.law != 'off'):
             return True, f'already in {mode}'
         x = self._last_x
+        if mode == 'law':
+            if self.user_law is None:
+                return False, 'mode law refused: no law loaded (controller parameter law.file)'
+            self._law_t0 = None
         if mode == 'balance':
             if x is not None and abs(x) > self.config.theta_0:
                 return False, (f'balance refused: |theta-pi| = {abs(x):.3g} > theta_0 = '
@@ -482,13 +538,54 @@ class Controller:
         return True, f'mode {mode}'
 
     def _auto_law(self, x: float, theta_dot: float | None) -> str:
-        c = self.config
+        """The law of ``auto`` for this state: a catch holds until theta_0 (hysteresis)."""
         if self.law == 'catch':
-            return 'swingup' if abs(x) > c.theta_0 else 'catch'
+            return 'swingup' if abs(x) > self.config.theta_0 else 'catch'
+        return self._start_law(x, theta_dot)
+
+    def _start_law(self, x: float, theta_dot: float | None) -> str:
+        """The law ``auto`` starts with: catch inside theta_s (6.5) (and the region (6.6) with
+        catch_region), else swing-up."""
+        c = self.config
         if abs(x) < c.theta_s and (not c.catch_region or theta_dot is None
                                    or abs(theta_dot + self.omega_p * x) < design.switching_region_bound(self.rig)):
             return 'catch'
         return 'swingup'
+
+    def _fresh_reason(self, note: str, resyncs: int | None) -> str:
+        """Why this state starts the mode afresh ('' if it does not): a new re-synchronisation
+        of the estimator, or the watchdog's note (stream resumed after stale / restarted)."""
+        why = []
+        if resyncs is not None:
+            if self._resyncs is not None and resyncs != self._resyncs:
+                why.append(f'estimator re-synchronised (resyncs {self._resyncs} -> {resyncs})')
+            self._resyncs = resyncs
+        # a stream silent for a few samples (a late state, a dropped one) resumes the law where it
+        # was: a fresh start of a catch that is holding would itself throw the pendulum off
+        short = note.startswith('state resumed') and self.watchdog.resumed_after < FRESH_START_GAP
+        if note and not short:
+            why.append(note)
+        return '; '.join(why)
+
+    def _fresh_start(self, t: float, x: float, theta_dot: float, why: str) -> None:
+        """Start the current mode afresh from this state (module doc), reported."""
+        mode = self.mode
+        if mode == 'off':
+            return
+        self.fresh_starts += 1
+        law = mode
+        if mode == 'auto':
+            law = self.law if self.law in ('brake', 'off') else self._start_law(x, theta_dot)
+        elif mode == 'balance':
+            if abs(x) > self.config.theta_0:
+                self.fall_trips += 1
+                self._switch(t, 'off', 'off', f'fell: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g} '
+                                              f'at a fresh start of balance ({why})')
+                return
+            self._capture_ref = True
+        elif mode == 'wheel_velocity':
+            self._wheel_pi.reset()
+        self._switch(t, mode, law, f'fresh start of {mode}: {why}')
 
     def pop_events(self) -> list[SwitchEvent]:
         out = list(self.events)
@@ -516,6 +613,8 @@ class Controller:
         law in ``auto`` and turns ``balance`` off beyond theta_0."""
         mode = self.mode
         if mode == 'auto':
+            if self.law in ('brake', 'off'):
+                return self._auto_stop_wheel(t, x, theta, theta_dot, wheel_angle, wheel_rate)
             law = self._auto_law(x, theta_dot)
             if law != self.law:
                 if law == 'catch':
@@ -538,6 +637,8 @@ class Controller:
             return self._balance(theta, theta_dot, wheel_angle, wheel_rate)
         if mode == 'swingup':
             return self._swing(theta, theta_dot, wheel_rate)
+        if mode == 'law':
+            return self._user_law_output(t, theta, theta_dot, wheel_angle, wheel_rate)
         if mode == 'wheel_velocity':
             return self._wheel_pi(wheel_rate)
         if mode == 'wheel_angle':
@@ -550,19 +651,48 @@ class Controller:
             return brake(self.config.wheel_kp, w, self.u_max)
         return 0.0
 
+    def _auto_stop_wheel(self, t, x, theta, theta_dot, wheel_angle, wheel_rate) -> float:
+        """``auto`` after an overspeed: brake (or coast, law off) until |w| < BRAKE_DONE_SPEED,
+        then start afresh from the state (swing-up, or catch inside theta_s)."""
+        w = motor_speed(theta_dot, wheel_rate)
+        if abs(w) >= BRAKE_DONE_SPEED:
+            return brake(self.config.wheel_kp, w, self.u_max) if self.law == 'brake' else 0.0
+        law = self._start_law(x, theta_dot)
+        self._switch(t, 'auto', law, f'wheel stopped: |w| = {abs(w):.1f} < {BRAKE_DONE_SPEED:g} rad/s: '
+                                     f'auto {law} again')
+        if law == 'catch':
+            return self._patch(theta, theta_dot, wheel_angle, wheel_rate)
+        return self._swing(theta, theta_dot, wheel_rate)
+
+    def _user_law_output(self, t, theta, theta_dot, wheel_angle, wheel_rate) -> float:
+        """u of the user's law; a faulted law: u = 0, mode off with the reason (the fault goes
+        into this sample's status)."""
+        if self._law_t0 is None:
+            self._law_t0 = t
+        state = LawState(t - self._law_t0, theta, theta_dot, wheel_angle, wheel_rate, self._friction_in)
+        try:
+            return self.user_law(state)
+        except LawError as exc:
+            self._law_fault = f'law fault: {exc}'
+            self._switch(t, 'off', 'off', self._law_fault)
+            return 0.0
+
     def _check_wheel_speed(self, t: float, theta_dot: float, wheel_rate: float) -> None:
         """Overspeed (motor speed beyond ``wheel_speed_limit``, below the cut-off (2.13)) while
-        the controller drives the wheel: mode off, brake or zero torque, reported."""
-        if self.mode == 'off':
+        the controller drives the wheel: brake or zero torque, reported; mode off, except in
+        ``auto``, which swings up again once the wheel has stopped."""
+        if self.mode == 'off' or self.law in ('brake', 'off'):     # nothing driven / stopping
             return
         w = motor_speed(theta_dot, wheel_rate)
         limit = self.config.wheel_speed_limit
         if abs(w) > limit:
             self.overspeed_trips += 1
-            action = self.config.wheel_speed_action
-            law = 'brake' if action == 'brake' else 'off'
-            self._switch(t, 'off', law, f'overspeed: |w| = {abs(w):.0f} > wheel_speed_limit = {limit:g} rad/s '
-                                        f'in {self.mode}/{self.law}: ' + ('braking' if law == 'brake' else 'u = 0'))
+            law = 'brake' if self.config.wheel_speed_action == 'brake' else 'off'
+            mode = 'auto' if self.mode == 'auto' else 'off'
+            then = (f', then auto again below {BRAKE_DONE_SPEED:g} rad/s' if mode == 'auto' else '')
+            self._switch(t, mode, law, f'overspeed: |w| = {abs(w):.0f} > wheel_speed_limit = {limit:g} rad/s '
+                                       f'in {self.mode}/{self.law}: '
+                                       + ('braking' if law == 'brake' else 'u = 0') + then)
 
     def _check_saturation(self, t: float, saturated: bool, x: float) -> bool:
         """``balance`` saturated for longer than max_saturation_time -> saturation_action;
@@ -587,8 +717,11 @@ class Controller:
         return True
 
     def update(self, t: float, seq: int, theta: float, theta_dot: float, wheel_angle: float,
-               wheel_rate: float, friction: float = 0.0, now: float | None = None) -> tuple[float, Status]:
-        """One sample: the command u (saturated) and the status."""
+               wheel_rate: float, friction: float = 0.0, now: float | None = None,
+               resyncs: int | None = None) -> tuple[float, Status]:
+        """One sample: the command u (saturated) and the status.  ``resyncs``: the estimator's
+        count of re-synchronisations (StateEstimate.resyncs; None: not known); a change starts
+        the mode afresh, as does a stream that resumes after stale (module doc)."""
         now = t if now is None else now
         # a bad state is answered with u = 0 but is no fresh state for the watchdog
         fault = self._bad_state(theta, theta_dot, wheel_angle, wheel_rate, friction)
@@ -606,6 +739,10 @@ class Controller:
         else:
             x = upright_deviation(theta)
             self._last_x = x
+            self._friction_in = friction
+            fresh = self._fresh_reason(note, resyncs)
+            if fresh:
+                self._fresh_start(t, x, theta_dot, fresh)
             self._check_wheel_speed(t, theta_dot, wheel_rate)
             u_law = self._law_output(t, x, theta, theta_dot, wheel_angle, wheel_rate)
             if self.mode != 'off':
@@ -617,6 +754,8 @@ class Controller:
         umax = self.u_max
         u = umax if u_uns > umax else (-umax if u_uns < -umax else u_uns)
         ev, self._pending = self._pending, None
+        if self._law_fault:
+            fault, self._law_fault = self._law_fault, ''
         status = Status(t=t, seq=seq, mode=self.mode, law=self.law, u=u, u_unsaturated=u_uns,
                         friction_compensation=fc, saturated=abs(u_uns) > umax,
                         last_switch=self.last_switch, switch_count=self.switch_count,
@@ -641,3 +780,8 @@ class Controller:
     @property
     def stale(self) -> bool:
         return self.watchdog.stale
+
+    @property
+    def estimator_resyncs(self) -> int | None:
+        """The estimator's re-synchronisation count of the last state taken (None: not known)."""
+        return self._resyncs

@@ -45,3 +45,31 @@ def test_bad_args_exit_2(capsys, argv):
         raise SystemExit(main(argv))
     assert exc.value.code == 2
     assert 'error' in capsys.readouterr().err
+
+
+def test_gains_for_another_rig_are_the_controllers_defaults_for_it(capsys):
+    """Issue 24 item 6: ``gains ... --rig FILE`` designs for that rig, and the controller's default
+    gain sets (designed from the rig YAML it reads) are the same numbers."""
+    from rwpend_control.supervisor import ControllerConfig
+    from rwpend_ident.rigfile import example_rig_file
+    from rwpend_model.rig import load_rig, load_rig_file
+    heavy = example_rig_file()
+    cfg = ControllerConfig.designed(load_rig_file(heavy))
+    shipped = ControllerConfig.designed(load_rig())
+    for design_, names in (('pdd', ('kpp', 'kdp', 'kdr')), ('patch', ('kpp', 'kdp', 'kdr'))):
+        code, out, _ = run(capsys, design_, '--rig', str(heavy), '--json')
+        assert code == 0
+        params = json.loads(out)['params']
+        group = 'balance' if design_ == 'pdd' else 'patch'
+        for n in names:
+            assert params[f'{group}.{n}'] == pytest.approx(getattr(cfg, f'{group}_{n}'), rel=1e-9)
+    assert cfg.balance_kpp != pytest.approx(shipped.balance_kpp, rel=0.01), 'the heavy rig needs other gains'
+
+
+def test_an_incomplete_rig_file_is_refused_with_the_missing_keys(capsys, tmp_path):
+    bad = tmp_path / 'rig.yaml'
+    bad.write_text('/**:\n  ros__parameters:\n    rig:\n      m_p: 0.3\n')
+    code, _, err = run(capsys, 'pdd', '--rig', str(bad))
+    assert code == 2 and 'missing rig key(s)' in err and 'l_p' in err
+    code, _, err = run(capsys, 'pdd', '--rig', str(bad), '--book-g')
+    assert code == 2 and 'excludes --rig' in err

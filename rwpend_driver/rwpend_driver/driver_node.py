@@ -1,7 +1,9 @@
 """``driver`` node: the real rig (or the emulator) over a serial port, with the simulator's topics.
 
 Publishes ``encoders`` (EncoderCounts: seq = monotone sample counter, header.stamp = receive
-time), subscribes ``command`` (MotorCommand), publishes ``/diagnostics``.  Managed lifecycle
+time) and, for every sample, ``applied`` (AppliedCommand: the command the device held over the
+interval that ended at that sample, from its SAMPLE frame -- what the motor got, beside what the
+controller sent), subscribes ``command`` (MotorCommand), publishes ``/diagnostics``.  Managed lifecycle
 (rclpy.lifecycle): configure = open the port and handshake; activate = enable the amplifier and
 publish; deactivate = zero torque, amplifier off; cleanup = close.  ``autostart`` (default
 true) configures and activates at start (retrying configure while the device is absent).
@@ -13,56 +15,103 @@ command, and holds so -- across reconnections and lifecycle transitions -- until
 explicitly cleared; cleared, the amplifier is enabled again and the torque stays zero until a
 fresh command arrives.  Encoders keep streaming throughout.
 
-All protocol and link logic lives in :mod:`rwpend_driver.link` / :mod:`rwpend_driver.protocol`.
+Threads: the link thread (started at configure) waits for the port's bytes and publishes each
+sample as wire bytes (rwpend_ros.wire) the moment it is read; the executor's thread (rclpy's
+EventsExecutor, like every node of the stack) takes the commands and writes each to the port
+at once. Neither ever waits for the port (rwpend_driver.port).
+
+``/diagnostics``: the link's state and counters, and its health over the last window
+(rwpend_driver.link_health: samples lost or taken late, frames the device refused or could not send,
+frames the port could not take, watchdog trips, commands refused as old): WARN or ERROR with
+what was seen, and a warning in the log with what to do (once per kind every
+``health_log_period`` s).
+
+All protocol and link logic lives in :mod:`rwpend_driver.link`, :mod:`rwpend_driver.protocol`,
+:mod:`rwpend_driver.port` and :mod:`rwpend_driver.link_health`.
 """
 from __future__ import annotations
 
-import os
 import struct
+import sys
 import threading
 import time
+from functools import partial
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 
-from rwpend_msgs.msg import EncoderCounts, MotorCommand
+from rwpend_msgs.msg import AppliedCommand, EncoderCounts, MotorCommand
 from rwpend_ros import wire
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS, ConfigError, LocalPublisher,
-                               LockedCallbacks, SlackTimer, declare_read_only, declare_rig, fast_path_values,
-                               local_subscription, locked, publish_diagnostic, run_node)
+from rwpend_ros.claim import CommandClaim, format_id
+from rwpend_ros.diagnostics import publish_diagnostic
+from rwpend_ros.health import EXIT_LOOP_DEAD, LoopHealth
+from rwpend_ros.nodes import SlackTimer, local_subscription
+from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
+from rwpend_ros.paramspec import ParamSpec
+from rwpend_ros.qos import QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS
+from rwpend_ros.runner import run_node
+from rwpend_ros.sched import raise_thread_priority
+from rwpend_ros.trace import tracer
 
-from .link import DriverLink, LinkConfig
+from . import link_health
+from . import protocol as P
+from .link import MASK32, DriverLink, LinkConfig
 
-PARAMS = {
-    'port': ('', 'serial device of the rig (e.g. /dev/ttyACM0, or the emulator\'s --link path)'),
-    'baud': (921600, 'baud rate (ignored by USB CDC and ptys)'),
-    'counts_per_rev': (0, 'encoder counts per revolution, checked against what the device reports '
-                       '(0 = rig.counts_per_rev of the rig YAML, the single source of truth)'),
-    'pendulum_sign': (1, 'direction sign of the pendulum encoder (+1 or -1)'),
-    'motor_sign': (1, 'direction sign of the motor: its encoder and its command (+1 or -1)'),
-    'zero_on_configure': (False, 'zero both encoders at configure (pendulum hanging at rest!)'),
-    'watchdog_period': (0.05, 'device watchdog: s without a valid command before the motor is zeroed'),
-    'command_timeout_samples': (3, 'samples without a fresh command before the driver sends u = 0'),
-    'link_timeout': (0.1, 's without a valid frame before the link is declared lost'),
-    'handshake_timeout': (0.5, 's to wait for each handshake answer'),
-    'connect_timeout': (2.0, 's configure waits for the first handshake'),
-    'autostart': (True, 'configure and activate at start'),
-    'frame_id': ('rwpend', 'frame_id of the published headers'),
-    'diagnostics_period': (0.5, 's between /diagnostics messages'),
-}
+RO = partial(ParamSpec, read_only=True)
+
+#: The driver's parameters, all read-only (set at start): name, default, description, bounds
+#: (those of :meth:`rwpend_driver.link.LinkConfig.errors`, which judges them again).
+PARAMS = [
+    RO('port', '', 'serial device of the rig (e.g. /dev/ttyACM0, or the emulator\'s --link path)',
+       constraints='not empty'),
+    RO('baud', 921600, 'baud rate (ignored by USB CDC and ptys)', low=1200, high=12_000_000),
+    RO('counts_per_rev', 0, 'encoder counts per revolution, checked against what the device reports '
+       '(0 = rig.counts_per_rev of the rig YAML, the single source of truth)', low=0, high=MASK32),
+    RO('pendulum_sign', 1, 'direction sign of the pendulum encoder (+1 or -1)', low=-1, high=1, step=2),
+    RO('motor_sign', 1, 'direction sign of the motor: its encoder and its command (+1 or -1)',
+       low=-1, high=1, step=2),
+    RO('zero_on_configure', False, 'zero both encoders at configure (pendulum hanging at rest!)'),
+    RO('watchdog_period', 0.05, 'device watchdog: s without a valid command before the motor is zeroed',
+       low=P.WATCHDOG_MIN_MS / 1000, high=P.WATCHDOG_MAX_MS / 1000),
+    RO('command_timeout_samples', 3, 'samples without a fresh command before the driver sends u = 0',
+       low=1),
+    RO('claim_timeout_samples', 500, 'samples without any command of the controller that claimed the '
+       'rig before another controller may claim it (rwpend_ros.claim)', low=1),
+    RO('link_timeout', 0.1, 's without a valid frame before the link is declared lost',
+       low=0.0, low_open=True),
+    RO('handshake_timeout', 0.5, 's to wait for each handshake answer', low=0.0, low_open=True),
+    RO('connect_timeout', 2.0, 's configure waits for the first handshake', low=0.0, low_open=True),
+    RO('autostart', True, 'configure and activate at start'),
+    RO('loop_dead_after', 2.0, 's of command timeout, after the loop had run, before the loop is '
+       'reported dead (an ERROR on /diagnostics; exit status 3 if still dead at the end)',
+       low=0.0, low_open=True),
+    RO('duration', 0.0, 's of closed loop (from the first command sent to the device) after which the '
+       'driver stops by itself, torque zero (0 = run until stopped; ./rwpend up --duration)', low=0.0),
+    RO('start.encoders_subscribers', 1, 'subscribers of encoders (the estimator, a recorder) to wait '
+       'for before the first sample is published: the device streams from the handshake, the run '
+       'starts when everyone listens, so a bag misses nothing of it', low=0),
+    RO('frame_id', 'rwpend', 'frame_id of the published headers'),
+    RO('diagnostics_period', 0.5, 's between /diagnostics messages', low=0.0, low_open=True),
+    RO('health_log_period', 10.0, 's between two warnings of the same kind about the link (the first '
+       'at once)', low=0.0, low_open=True),
+]
 
 
-class DriverNode(LockedCallbacks, LifecycleNode):
+class DriverNode(LifecycleNode):
+    """The rig's plant node: topics and parameters of the module doc; the link in DriverLink."""
+
     def __init__(self) -> None:
         super().__init__('driver')
-        p = declare_read_only(self, PARAMS)
-        self.rig = declare_rig(self)
+        self.param_table = ParameterTable(self)
+        p = self.param_table.declare(PARAMS)
+        self.rig = declare_rig(self.param_table)
         if p['counts_per_rev'] == 0:
             p['counts_per_rev'] = int(self.rig.counts_per_rev)
         self.p = p
         self.cfg = LinkConfig(port=p['port'], baud=p['baud'], counts_per_rev=p['counts_per_rev'],
+                              sample_period=float(self.rig.sample_period),
                               pendulum_sign=p['pendulum_sign'], motor_sign=p['motor_sign'],
                               zero_on_configure=bool(p['zero_on_configure']),
                               watchdog_period=float(p['watchdog_period']),
@@ -70,42 +119,67 @@ class DriverNode(LockedCallbacks, LifecycleNode):
                               link_timeout=float(p['link_timeout']),
                               handshake_timeout=float(p['handshake_timeout']))
         errors = self.cfg.errors()
-        for name in ('connect_timeout', 'diagnostics_period'):
-            if not isinstance(p[name], (int, float)) or not p[name] > 0:
-                errors.append(f'{name} must be > 0, got {p[name]!r}')
         if errors:
             raise ConfigError('driver parameters: ' + '; '.join(errors))
         self.link: DriverLink | None = None
         self.thread: threading.Thread | None = None
         self.stop = threading.Event()
+        #: wall time - monotonic time at start: the samples' stamps (on_sample)
+        self.wall_offset_ns = time.time_ns() - time.monotonic_ns()
         self.active = False
         self.lifecycle = 'unconfigured'
         self.configure_failures = 0
         self.last_configure_error = ''
         self.estop = False
         self.estop_commands = 0          # commands refused because of the e-stop
-        self.enc = EncoderCounts()
-        self.enc.header.frame_id = p['frame_id']
-        # first to an estimator in another process of this host, then DDS (rwpend_ros.hostbus)
-        self.pub_enc = LocalPublisher(self, EncoderCounts, 'encoders', QOS_CONTROL_PUB)
+        self.frame_id = p['frame_id']
+        # the link thread publishes wire bytes (rwpend_ros.wire): no message objects built
+        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
+        self.pub_applied = self.create_publisher(AppliedCommand, 'applied', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.malformed_commands = 0
-        # also straight from a controller in another process of this host (wire bytes)
-        local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL)
+        # wire bytes, once each and in order (rwpend_ros.order)
+        self.sub_cmd = local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
+                                          sender=wire.command_sender)
+        #: one controller at a time (rwpend_ros.claim), judged on the link's sample counter
+        try:
+            self.claim = CommandClaim(p['claim_timeout_samples'])
+        except ValueError as exc:
+            raise ConfigError(f'claim_timeout_samples {exc}') from exc
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
         # in the loop's slack: after a command is written, not while one waits (PERFORMANCE.md 19.)
         self.diag_timer = SlackTimer(self, p['diagnostics_period'], self.publish_diagnostics)
+        self.diag_lock = threading.Lock()   # the link thread reports losses at once, too
+        self.health_before: dict = {}       # the link's counters at the previous diagnostics
+        self.health_at = time.monotonic()
+        self.health_log = link_health.Throttle(p['health_log_period'])
+        self.trace = tracer('driver')       # None unless RWPEND_TRACE is set (profiling)
+        self.link_thread_priority = ''
+        self.loop_started: float | None = None   # monotonic time of the first command sent
+        #: seq of the first sample published (None: still waiting for start.encoders_subscribers)
+        self.first_published: int | None = None
+        self.samples_before_start = 0            # samples read while waiting, not published
+        self.waiting_since = time.monotonic()
+        self.waiting_warned = False
+        #: the loop's verdicts as the plant sees them (rwpend_ros.health): dead / alive
+        self.loop = LoopHealth(self.rig.sample_period, dead_after_s=p['loop_dead_after'])
+        self.finished = False
+        if p['duration'] > 0:
+            self.create_timer(0.1, self.check_duration)
+        self.next_configure = 0.0
         self.autostart_timer = None
         if p['autostart']:
-            self.autostart_timer = self.create_timer(0.01, self.autostart)
+            # a fixed period (the EventsExecutor of rclpy 7.1.6 mishandles a re-armed timer)
+            self.autostart_timer = self.create_timer(0.05, self.autostart)
 
     # ------------------------------------------------------------ autostart
     def autostart(self) -> None:
-        """Configure (retried every connect_timeout while the device is absent), then activate."""
-        if self.lifecycle == 'unconfigured':
-            self.autostart_timer.timer_period_ns = int(1e9)
+        """Configure (retried every second after connect_timeout while the device is absent),
+        then activate."""
+        if self.lifecycle == 'unconfigured' and time.monotonic() >= self.next_configure:
             self.trigger_configure()
+            self.next_configure = time.monotonic() + 1.0
         if self.lifecycle == 'inactive':
             self.trigger_activate()
         if self.lifecycle == 'active':
@@ -122,11 +196,11 @@ class DriverNode(LockedCallbacks, LifecycleNode):
         else:
             lg.info(msg)
 
-    # transitions run holding the callback lock, like every other callback of the node (a
-    # command taken by the fast path's thread never sees a transition half done)
-    @locked
+    # transitions and command callbacks all run on the executor's thread (one at a time); the
+    # link thread only publishes samples and reads self.active
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.link = DriverLink(self.cfg, on_sample=self.on_sample, log=self._log)
+        self.link = DriverLink(self.cfg, on_sample=self.on_sample, log=self._log, trace=self.trace)
+        self.health_before = {}             # a new link counts from zero
         deadline = time.monotonic() + self.p['connect_timeout']
         ok = False
         while time.monotonic() < deadline:
@@ -151,7 +225,6 @@ class DriverNode(LockedCallbacks, LifecycleNode):
         self.lifecycle = 'inactive'
         return TransitionCallbackReturn.SUCCESS
 
-    @locked
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.link.set_active(not self.estop)    # a latched e-stop keeps the amplifier off
         self.active = True
@@ -159,7 +232,6 @@ class DriverNode(LockedCallbacks, LifecycleNode):
         self.get_logger().info('active: amplifier enabled, zero torque until commands arrive')
         return TransitionCallbackReturn.SUCCESS
 
-    @locked
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.active = False
         self.link.set_active(False)
@@ -175,27 +247,29 @@ class DriverNode(LockedCallbacks, LifecycleNode):
             self.thread = None
         if self.link is not None:
             self.link.close()
+            if self.link.counters.connects:
+                self._log('info', f'serial link: {self.link.summary()}')
         self.lifecycle = 'unconfigured'
 
-    @locked
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._teardown()
         self.link = None
         return TransitionCallbackReturn.SUCCESS
 
-    @locked
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._teardown()
         self.lifecycle = 'finalized'
         return TransitionCallbackReturn.SUCCESS
 
-    @locked
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._teardown()
         return TransitionCallbackReturn.SUCCESS
 
     # ------------------------------------------------------------ data path
     def link_loop(self) -> None:
+        # one real-time priority above the process (and the other loop processes): each sample
+        # is taken as it comes, ahead of the command callback and the DDS threads
+        self.link_thread_priority = raise_thread_priority(1)
         link = self.link
         was = True
         while not self.stop.is_set():
@@ -207,37 +281,119 @@ class DriverNode(LockedCallbacks, LifecycleNode):
                 was = link.connected
                 self.publish_diagnostics()      # report losses and recoveries at once
 
-    def on_sample(self, seq: int, pc: int, mc: int, s) -> None:
+    def on_sample(self, seq: int, pc: int, mc: int, s, rx: float) -> None:
+        """In the link thread, as each sample is read: encoders as wire bytes, stamped now -- on the
+        wall clock as it read at start, advanced by the monotonic clock, so the stamps never go
+        back when the wall clock is stepped (NTP): the subscribers' order gates (rwpend_ros.order)
+        would take a stamp that goes back for a stale sample."""
         if not self.active:
             return
-        now = time.time_ns()
-        e = self.enc
-        e.header.stamp.sec, e.header.stamp.nanosec = divmod(now, 1_000_000_000)
-        e.seq, e.pendulum_counts, e.motor_counts = seq, pc, mc
+        if self.first_published is None and not self._listeners_ready(seq):
+            self.samples_before_start += 1
+            return
+        header = wire.pack_header(*divmod(time.monotonic_ns() + self.wall_offset_ns, 1_000_000_000),
+                                  self.frame_id)
+        if self.trace is not None:
+            self.trace('drv.pub', seq)
         try:
-            self.pub_enc.publish(e)
+            self.pub_enc.publish(wire.pack_encoders(header, seq, pc, mc))
+            # after the encoders (the loop waits for those): what the motor was driven with
+            held = -1 if s.cmd_sample == P.NO_SAMPLE else seq - ((s.sample - s.cmd_sample) & MASK32)
+            self.pub_applied.publish(wire.pack_applied(header, seq, held,
+                                                       self.cfg.motor_sign * s.u_applied_milli / P.U_SCALE))
         except Exception:  # noqa: BLE001 - context shut down under the link thread
             self.stop.set()
+        link = self.link
+        if link is not None:
+            self._loop_event(self.loop.sample(False, link.timed_out))
+
+    def _listeners_ready(self, seq: int) -> bool:
+        """Before the first published sample: True once ``start.encoders_subscribers`` listen to
+        encoders (said in the log); a wait of more than 5 s is said once, with who is missing."""
+        need = self.p['start.encoders_subscribers']
+        have = self.pub_enc.get_subscription_count()
+        if have >= need:
+            self.first_published = seq
+            self.get_logger().info(f'{have} subscriber(s) of encoders: publishing from sample {seq} '
+                                   f'({self.samples_before_start} read before, not published)')
+            return True
+        if not self.waiting_warned and time.monotonic() - self.waiting_since > 5.0:
+            self.waiting_warned = True
+            self.get_logger().warning(f'waiting for {need} subscriber(s) of encoders (the estimator, a '
+                                      f'recorder), {have} so far: no sample is published until then')
+        return False
 
     def on_command_raw(self, data: bytes) -> None:
         """A command as wire bytes (rwpend_ros.wire); malformed bytes are counted, nothing else
         changes."""
         try:
-            seq, u = wire.unpack_command(data)
+            seq, u, source, release = wire.unpack_command_sender(data)
         except (struct.error, IndexError):
             self.malformed_commands += 1
             return
-        self.command(seq, u)
+        if self.trace is not None:
+            self.trace('drv.cmd', seq)
+        self._offer(source, seq, u, release)
         self.diag_timer.sample_done()
 
-    def command(self, seq: int, u: float) -> None:
+    def _offer(self, source: int, seq: int, u: float, release: bool) -> bool:
+        """The command (seq, u) of controller ``source`` to the link, if that controller may
+        drive the rig (rwpend_ros.claim, judged on the link's newest sample); True when sent. A
+        release sends u = 0 at once. A change of the claim is said at once (log, /diagnostics)."""
+        link = self.link
+        newest = link.last_seq if link is not None and link.last_seq is not None else 0
+        taken = self.claim.admit(source, newest, lambda: self.command(seq, u), release)
+        event = self.claim.event
+        if event == 'refused':
+            self.get_logger().warning(f'command from controller {format_id(source)} refused: the rig is '
+                                      f'claimed by {format_id(self.claim.holder)}')
+        elif event is not None:
+            self.get_logger().info(f'rig {event} by controller {format_id(source)}')
+        if event == 'released' and link is not None and link.last_seq is not None:
+            self.command(link.last_seq, 0.0)
+        if event is not None:
+            self.publish_diagnostics()
+        return taken
+
+    def command(self, seq: int, u: float) -> bool:
+        """Offer a command to the link; True when it was sent to the device."""
         link = self.link
         if self.estop:
             self.estop_commands += 1
-            return
+            return False
         if link is None or not self.active:
+            return False
+        if not link.command(seq, u)[0]:
+            return False
+        if self.loop_started is None:
+            self.loop_started = time.monotonic()
+        self._loop_event(self.loop.command())
+        return True
+
+    def _loop_event(self, event: str | None) -> None:
+        """The loop's health changed: said at once, in the log and on /diagnostics."""
+        if event == 'dead':
+            self.get_logger().error(self.loop.dead_reason())
+        elif event == 'alive':
+            self.get_logger().info('the loop is answering again: commands are fresh')
+        else:
             return
-        link.command(seq, u)
+        self.publish_diagnostics()
+
+    def exit_status(self) -> int:
+        """:data:`rwpend_ros.health.EXIT_LOOP_DEAD` when the loop was dead at the end."""
+        if self.loop.dead:
+            print(f'driver: {self.loop.dead_reason()} (at the end of the run)', file=sys.stderr, flush=True)
+            return EXIT_LOOP_DEAD
+        return 0
+
+    def check_duration(self) -> None:
+        """``duration`` s after the first command: finished, the runner ends the process
+        (rwpend_ros.runner; close() zeroes the motor)."""
+        if (not self.finished and self.loop_started is not None
+                and time.monotonic() - self.loop_started >= self.p['duration']):
+            self.get_logger().info(f"duration reached: {self.p['duration']:g} s since the first command")
+            self.finished = True
 
     # ------------------------------------------------------------ e-stop
     def set_estop(self, on: bool) -> str:
@@ -266,38 +422,66 @@ class DriverNode(LockedCallbacks, LifecycleNode):
 
     # ------------------------------------------------------------ diagnostics
     def publish_diagnostics(self) -> None:
-        link = self.link
-        values = {'lifecycle': self.lifecycle, 'port': self.cfg.port, 'estop': self.estop,
-                  'estop_commands': self.estop_commands, 'malformed_commands': self.malformed_commands,
-                  **fast_path_values(self)}
-        if self.estop:
-            level, msg = DiagnosticStatus.ERROR, 'e-stop latched: motor at zero, amplifier disabled'
-            if link is not None:
-                values.update(link.snapshot())
-        elif link is None:
-            level = DiagnosticStatus.ERROR if self.last_configure_error else DiagnosticStatus.WARN
-            msg = (f'not configured: {self.last_configure_error}' if self.last_configure_error
-                   else 'not configured')
-            values['configure_failures'] = self.configure_failures
-        else:
-            snap = link.snapshot()
-            values.update(snap)
-            if not snap['connected']:
-                level, msg = DiagnosticStatus.ERROR, f'link down ({snap["error"]}); reconnecting, no encoders'
-            elif snap.get('device.watchdog_tripped'):
-                level, msg = DiagnosticStatus.WARN, 'device watchdog tripped: motor at zero'
-            elif snap['command_timed_out'] and self.active and snap['timeouts']:
-                level, msg = DiagnosticStatus.WARN, 'command timeout: sending u = 0'
-            elif self.active:
-                level, msg = DiagnosticStatus.OK, 'active'
+        """The link's state and counters, with the worst of its state and its health over the
+        window since the previous report (:func:`rwpend_driver.link_health.assess`); each finding is
+        also logged, with what to do, once per kind every health_log_period s."""
+        with self.diag_lock:
+            link = self.link
+            values = {'lifecycle': self.lifecycle, 'port': self.cfg.port, 'estop': self.estop,
+                      'estop_commands': self.estop_commands, 'malformed_commands': self.malformed_commands,
+                      'command_order': self.sub_cmd.summary(),
+                      'first_published_seq': -1 if self.first_published is None else self.first_published,
+                      'samples_before_start': self.samples_before_start,
+                      'link_thread_priority': self.link_thread_priority, **self.loop.values(),
+                      **self.claim.values()}
+            if link is None:
+                level = link_health.ERROR if self.last_configure_error or self.estop else link_health.WARN
+                msg = (f'not configured: {self.last_configure_error}' if self.last_configure_error
+                       else 'not configured')
+                values['configure_failures'] = self.configure_failures
             else:
-                level, msg = DiagnosticStatus.OK, 'connected, inactive (torque off)'
+                snap = link.snapshot()
+                values.update(snap)
+                level, msg = self._link_state(snap)
+                findings = self._link_health(link, values)
+                if findings:
+                    level = max(level, link_health.level_of(findings))
+                    msg += '; ' + '; '.join(f.what for f in findings)
+            if self.loop.dead:
+                level, msg = link_health.ERROR, self.loop.dead_reason() + '; ' + msg
+            if self.estop:
+                level, msg = link_health.ERROR, 'e-stop latched: motor at zero, amplifier disabled; ' + msg
         try:
             publish_diagnostic(self.pub_diag, self.get_clock().now().nanoseconds,
                                f'{self.get_namespace().rstrip("/")}/driver: serial link', self.cfg.port,
                                level, msg, values)
         except Exception:  # noqa: BLE001 - context shutting down
             pass
+
+    def _link_state(self, snap: dict) -> tuple[int, str]:
+        if not snap['connected']:
+            return link_health.ERROR, f'link down ({snap["error"]}); reconnecting, no encoders'
+        if snap.get('device.watchdog_tripped'):
+            return link_health.WARN, 'device watchdog tripped: motor at zero'
+        if snap['command_timed_out'] and self.active and snap['timeouts']:
+            return link_health.WARN, 'command timeout: sending u = 0'
+        if self.claim.intruding(self.link.last_seq or 0, int(round(1.0 / self.rig.sample_period))):
+            return link_health.WARN, (f'commands of controller {format_id(self.claim.intruder)} refused: '
+                                      f'the rig is claimed by {format_id(self.claim.holder)}')
+        return link_health.OK, 'active' if self.active else 'connected, inactive (torque off)'
+
+    def _link_health(self, link: DriverLink, values: dict) -> list:
+        """Findings over the window since the last report; logs those due."""
+        now = time.monotonic()
+        after = link.counter_values()
+        max_delay = link.take_window_max_delay_ms()
+        values['window_max_delay_ms'] = f'{max_delay:.3f}'
+        findings = link_health.assess(self.health_before, after, now - self.health_at, max_delay) \
+            if self.health_before else []
+        self.health_before, self.health_at = after, now
+        for f in self.health_log.due(findings, now):
+            self._log('error' if f.level == link_health.ERROR else 'warn', f'serial link: {f.what}. {f.advice}')
+        return findings
 
     def close(self) -> None:
         """Called by run_node before destruction: torque zero, amplifier off, port closed."""
@@ -306,10 +490,6 @@ class DriverNode(LockedCallbacks, LifecycleNode):
 
 
 def main(args=None) -> int:
-    # The data path runs in the driver's own link thread; the executor only serves commands,
-    # lifecycle services and a re-armed autostart timer, which the EventsExecutor of rclpy 7.1.6
-    # does not handle reliably (see rwpend_ros.common.make_executor).
-    os.environ.setdefault('RWPEND_EXECUTOR', 'single')
     return run_node(DriverNode, args)
 
 

@@ -1,29 +1,45 @@
 """PC side of the serial link: open, handshake, sample stream, commands, loss and reconnection.
 
-Pure Python, no rclpy: the transport comes from an ``opener(port, baud)`` callable returning an
-object with ``read(n) -> bytes`` (returns b'' after a short timeout), ``write(data)``,
-``reset_input_buffer()`` and ``close()`` (pyserial's Serial fits; :func:`serial_opener`).
-Errors of the transport (OSError, pyserial's SerialException) mean the link is lost.
+Pure Python, no rclpy: the transport comes from an ``opener(port, baud)`` callable returning a
+non-blocking port (:mod:`rwpend_driver.port`: ``wait``, ``read``, ``write``, ``flush_input``,
+``close``; :func:`rwpend_driver.port.serial_opener` for the real one). Errors of the transport
+(OSError, pyserial's SerialException) mean the link is lost.
 
-One thread (the node's link thread) calls :meth:`DriverLink.poll` in a loop; it alone reads.
-:meth:`DriverLink.command` and :meth:`DriverLink.set_active` may be called from other
-threads (the ROS callbacks); they only write frames.
+One thread (the node's link thread) calls :meth:`DriverLink.poll` in a loop; it alone reads: it
+waits for bytes (``poll``, without the GIL), takes everything there, and hands each SAMPLE on at
+once. :meth:`DriverLink.command` and :meth:`DriverLink.set_active` may be called from other
+threads (the ROS callbacks); they write their frame at once, never waiting for the port.
 
 States: CLOSED (waiting for the next attempt, backoff 0.1 s doubling to 2 s) -> handshake
 (HELLO/HELLO_REPLY, resolution check, SET_WATCHDOG, optional ZERO, ENABLE when active) ->
 CONNECTED.  CONNECTED -> CLOSED when the port fails or no valid frame arrives for
 ``link_timeout`` s.  After every (re)connection the device holds zero torque until a fresh
 command arrives that answers a sample of the new connection.
+
+Sample numbering: the published ``seq`` never goes back and counts time. Within a connection it
+follows the device's sample counter (a gap there is a gap in seq, counted in ``samples_lost``).
+Across a reconnection to the same device (same serial number, counter advanced as much as the
+time allows) it goes on following that counter, so the outage is a gap of exactly the samples
+the device took meanwhile; after a device restart it jumps by the time elapsed, in samples.
+Either way the gap is counted in ``outage_samples``.
+
+Commands (:meth:`DriverLink.command`), as the simulator's :meth:`rwpend_sim.sim_core.SimCore.command`:
+refused when non-finite, answering a sample not published yet or of a previous connection, not
+newer than the last one sent (``stale_commands``), or
+answering a sample ``command_timeout_samples`` or more old (``old_commands``): a controller acting
+on old states never moves the motor. So the device never has a reason to refuse one.
 """
 from __future__ import annotations
 
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Callable, Optional
 
 from . import protocol as P
+from .link_health import DelayMeter
+from .port import serial_opener
 
 MASK32 = 0xFFFFFFFF
 
@@ -37,6 +53,7 @@ class LinkConfig:
     port: str = ''
     baud: int = 921600
     counts_per_rev: int = 4000
+    sample_period: float = 0.0       # s, checked against the device's (0: not checked)
     pendulum_sign: int = 1
     motor_sign: int = 1
     zero_on_configure: bool = False
@@ -55,6 +72,9 @@ class LinkConfig:
             e.append(f'baud must be an integer in 1200..12000000, got {self.baud!r}')
         if not isinstance(self.counts_per_rev, int) or not 1 <= self.counts_per_rev <= MASK32:
             e.append(f'counts_per_rev must be a positive integer, got {self.counts_per_rev!r}')
+        h = self.sample_period
+        if not isinstance(h, (int, float)) or not math.isfinite(h) or not (h == 0 or 1e-5 <= h <= 0.1):
+            e.append(f'sample_period must be 0 (not checked) or in [1e-5, 0.1] s, got {h!r}')
         for name in ('pendulum_sign', 'motor_sign'):
             if getattr(self, name) not in (1, -1):
                 e.append(f'{name} must be 1 or -1, got {getattr(self, name)!r}')
@@ -78,33 +98,70 @@ class LinkCounters:
     link_losses: int = 0
     failed_attempts: int = 0
     samples: int = 0
-    samples_lost: int = 0            # gaps in the device's sample counter
+    samples_lost: int = 0            # gaps in the device's sample counter while connected
     frames_lost: int = 0             # gaps in the device's frame sequence numbers
+    outage_samples: int = 0          # the seq gap across reconnections (samples taken while down)
+    duplicate_samples: int = 0       # a sample number again (dropped)
+    device_restarts: int = 0         # the device's counter went back while connected
+    reads: int = 0                   # reads that brought at least one sample
+    overruns: int = 0                # ... more than one: the link thread was a period behind
+    max_backlog: int = 0             # most samples in one read
+    late_samples: int = 0            # taken more than one period after the device sent them
     commands_sent: int = 0
-    commands_refused: int = 0        # non-finite, stale, future, from a previous connection
-    commands_inactive: int = 0       # arrived while not active (ignored)
+    commands_refused: int = 0        # non-finite, future, from a previous connection
+    stale_commands: int = 0          # not newer than the last command sent (or zeroed)
+    old_commands: int = 0            # answering a sample command_timeout_samples or more old
+    commands_inactive: int = 0       # arrived while not active or the link down (ignored)
     commands_saturated: int = 0
+    tx_dropped: int = 0              # frames the port could not take (its buffer full)
     timeout_samples: int = 0         # samples answered with u = 0 by the PC-side timeout
     timeouts: int = 0                # timeout episodes
     watchdog_trips: int = 0          # rising edges of the device's ST_WATCHDOG
+    device_rx_bad: int = 0           # frames the device refused since the first connection
     nacks: int = 0
     last_refusal: str = ''
     parser_totals: dict = field(default_factory=dict)
 
 
-def serial_opener(port: str, baud: int):
-    """Open a pyserial port for the link (raw 8N1, short read timeout)."""
-    import serial  # pyserial; imported here so the pure tests need no serial port
-    s = serial.Serial(port, baud, timeout=0.005, write_timeout=0.1, exclusive=True)
-    return s
+class FrameWriter:
+    """Frames to a non-blocking port, never cut: when the port takes only part of a frame, the
+    rest goes out before anything else; a frame that finds the port full (or a rest still
+    pending) is dropped whole. Not thread-safe: the link's lock guards it."""
+
+    def __init__(self, port) -> None:
+        self.port = port
+        self.rest = b''
+
+    def send(self, data: bytes) -> bool:
+        """False: the frame was dropped (the port is full)."""
+        if self.rest:
+            self.rest = self.rest[max(self.port.write(self.rest), 0):]
+            if self.rest:
+                return False
+        n = self.port.write(data)
+        if n <= 0:
+            return False
+        self.rest = data[n:]
+        return True
+
+
+@dataclass
+class Resume:
+    """Where the previous connection stopped: to number the samples of the next one."""
+    seq: int
+    dev_sample: int
+    at: float            # clock time of its last sample
+    serial: int
+    period: float        # the device's sample period, s
 
 
 class DriverLink:
     def __init__(self, cfg: LinkConfig, opener: Callable = serial_opener,
                  clock: Callable[[], float] = time.monotonic,
-                 on_sample: Optional[Callable[[int, int, int, P.Sample], None]] = None,
+                 on_sample: Optional[Callable[[int, int, int, P.Sample, float], None]] = None,
                  log: Optional[Callable[[str, str], None]] = None,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
+                 sleep: Callable[[float], None] = time.sleep,
+                 trace=None) -> None:
         errs = cfg.errors()
         if errs:
             raise ValueError('; '.join(errs))
@@ -114,10 +171,14 @@ class DriverLink:
         self.sleep = sleep
         self.on_sample = on_sample
         self.log = log or (lambda level, msg: None)
-        self.lock = threading.RLock()
+        self.trace = trace                # rwpend_ros.trace.Trace or None (profiling)
+        self.lock = threading.Lock()      # tx, the seq mapping, the command state
         self.port = None
+        self.writer: Optional[FrameWriter] = None
         self.parser = P.StreamParser(accept={P.HELLO_REPLY, P.SAMPLE, P.ACK})
         self.counters = LinkCounters()
+        self.delay = DelayMeter()
+        self.window_max_delay_us = 0.0
         self.tx_seq = 0
         self.connected = False
         self.want_active = False
@@ -125,37 +186,49 @@ class DriverLink:
         self.error = 'not connected yet'
         self.fatal = False
         self.hello: Optional[P.HelloReply] = None
+        self.period = 0.001               # the device's sample period (HELLO_REPLY)
         self.next_attempt = 0.0
         self.backoff = cfg.backoff_initial
         self.last_rx = 0.0
         self.last_enable_tx = -math.inf
-        # sample numbering: ros seq = ros_base + (device sample - dev_base) mod 2^32
-        self.next_seq = 0                 # the seq the next published sample gets (at least)
+        # sample numbering: seq = ros_base + (device sample - dev_base) mod 2^32
         self.ros_base: Optional[int] = None
         self.dev_base = 0
+        self.resume: Optional[Resume] = None
         self.last_seq: Optional[int] = None
+        self.last_sample_at = 0.0
         self.last_dev_sample: Optional[int] = None
         self.last_frame_seq: Optional[int] = None
         self.last_sample: Optional[P.Sample] = None
+        self.last_rx_bad: Optional[int] = None
         self.last_cmd_seq = -1
+        self.last_cmd_dev: Optional[int] = None     # device sample of the last command sent
         self.last_cmd_arrival: Optional[int] = None
         self.timed_out = False
         self.prev_tripped = False
 
     # ------------------------------------------------------------ transport
     def _write(self, msg) -> int:
-        """Send a message; returns its frame seq. Raises OSError when the port fails."""
+        """Send a message at once; returns its frame seq (-1: the port was full, dropped).
+        Raises OSError when the port fails. Call with the lock held."""
+        if self.port is None:
+            raise OSError('port closed')
+        seq = self.tx_seq
+        self.tx_seq = (self.tx_seq + 1) & 0xFFFF
+        if not self.writer.send(P.pack(msg, seq)):
+            self.counters.tx_dropped += 1
+            return -1
+        return seq
+
+    def _send(self, msg) -> int:
         with self.lock:
-            if self.port is None:
-                raise OSError('port closed')
-            seq = self.tx_seq
-            self.tx_seq = (self.tx_seq + 1) & 0xFFFF
-            self.port.write(P.pack(msg, seq))
-            return seq
+            return self._write(msg)
 
     def _close_port(self) -> None:
         with self.lock:
-            port, self.port = self.port, None
+            if self.connected:
+                self._remember_resume()
+            port, self.port, self.writer = self.port, None, None
             self.connected = False
             self.ros_base = None
         if port is not None:
@@ -178,15 +251,13 @@ class DriverLink:
             tot[k] = tot.get(k, 0) + v
         return tot
 
-    def _read_frames(self):
+    def _read_frames(self, timeout: float) -> list[P.Frame]:
+        """Wait up to ``timeout`` s for bytes, then parse everything there."""
         port = self.port
-        if port is None:
+        if port is None or not port.wait(timeout):
             return []
-        # all that is waiting, or block (read timeout) for the first byte
-        data = port.read(getattr(port, 'in_waiting', 0) or 1)
-        if data:
-            return self.parser.feed(data)
-        return []
+        data = port.read()
+        return self.parser.feed(data) if data else []
 
     # ------------------------------------------------------------ connection
     def _await(self, pred, timeout: float, resend=None):
@@ -194,7 +265,7 @@ class DriverLink:
         end = self.clock() + timeout
         last_send = self.clock()
         while self.clock() < end:
-            for fr in self._read_frames():
+            for fr in self._read_frames(min(0.02, max(0.0, end - self.clock()))):
                 if pred(fr):
                     return fr
             if resend is not None and self.clock() - last_send > 0.1:
@@ -203,7 +274,7 @@ class DriverLink:
         return None
 
     def _request(self, msg, what: str) -> None:
-        seq = self._write(msg)
+        seq = self._send(msg)
         fr = self._await(lambda f: f.type == P.ACK and f.msg.request_seq == seq, self.cfg.handshake_timeout)
         if fr is None:
             raise TimeoutError(f'no ACK to {what} within {self.cfg.handshake_timeout} s')
@@ -211,21 +282,12 @@ class DriverLink:
             self.counters.nacks += 1
             raise HandshakeError(f'device refused {what}: {P.RESULT_NAMES.get(fr.msg.result, fr.msg.result)}')
 
-    def connect(self) -> None:
-        """Open the port and handshake. Raises OSError/TimeoutError/HandshakeError on failure."""
+    def _hello(self) -> P.HelloReply:
         c = self.cfg
-        self._close_port()
-        port = self.opener(c.port, c.baud)
-        with self.lock:
-            self.port = port
-        try:
-            port.reset_input_buffer()
-        except Exception:  # noqa: BLE001 - not every transport has it
-            pass
         hello = P.Hello(P.PROTOCOL_MAJOR, P.PROTOCOL_MINOR)
 
         def send_hello():
-            self._write(hello)
+            self._send(hello)
         send_hello()
 
         def is_reply(f):
@@ -243,27 +305,53 @@ class DriverLink:
             raise HandshakeError(f'encoder resolution mismatch: device reports {h.counts_per_rev_pendulum} '
                                  f'(pendulum) / {h.counts_per_rev_motor} (motor) counts/rev, parameter '
                                  f'counts_per_rev = {c.counts_per_rev}')
+        if c.sample_period and h.sample_period_us != int(round(c.sample_period * 1e6)):
+            raise HandshakeError(f'the device samples every {h.sample_period_us} us, the stack runs with '
+                                 f'rig.sample_period = {c.sample_period * 1e6:g} us: run both with the '
+                                 f'same h (the firmware\'s; ./rwpend emulate --h, ./rwpend up --h)')
+        return h
+
+    def connect(self) -> None:
+        """Open the port and handshake. Raises OSError/TimeoutError/HandshakeError on failure."""
+        c = self.cfg
+        self._close_port()
+        port = self.opener(c.port, c.baud)
+        with self.lock:
+            self.port, self.writer = port, FrameWriter(port)
+        port.flush_input()
+        h = self._hello()
         self.hello = h
+        self.period = h.sample_period_us * 1e-6 if h.sample_period_us else 0.001
         self._request(P.Enable(0), 'ENABLE 0')
         self._request(P.SetWatchdog(int(round(c.watchdog_period * 1000))), 'SET_WATCHDOG')
         if self.zero_pending:
             self._request(P.Zero(P.ZERO_PENDULUM | P.ZERO_MOTOR), 'ZERO')
             self.zero_pending = False
             self.log('info', 'encoders zeroed (zero_on_configure)')
-        if self._await(lambda f: f.type == P.SAMPLE, c.handshake_timeout) is None:
+        first = self._await(lambda f: f.type == P.SAMPLE, c.handshake_timeout)
+        if first is None:
             raise TimeoutError(f'device answered the handshake but sends no SAMPLE frames '
                                f'within {c.handshake_timeout} s')
+        # a watchdog that tripped while the link was down (the cable pulled while the motor was
+        # on) is seen here, before the ENABLE below clears it
+        tripped_offline = bool(first.msg.status & P.ST_WATCHDOG)
         with self.lock:
             self.connected = True
             self.ros_base = None
             self.last_cmd_arrival = None
+            self.last_cmd_dev = None
             self.last_frame_seq = None
-            self.prev_tripped = False
+            self.last_rx_bad = None
+            self.prev_tripped = tripped_offline
             self.last_rx = self.clock()
+            self.delay.reset()
             if self.want_active:
                 self._write(P.Enable(1))
                 self.last_enable_tx = self.clock()
         self.counters.connects += 1
+        if tripped_offline:
+            self.counters.watchdog_trips += 1
+            self.log('warn', 'device watchdog tripped while the link was down: motor at zero')
         self.backoff = c.backoff_initial
         self.error = ''
         self.fatal = False
@@ -296,80 +384,144 @@ class DriverLink:
         self.next_attempt = self.clock() + self.backoff
 
     # ------------------------------------------------------------ loop
-    def poll(self) -> None:
-        """One iteration of the link thread (blocks at most ~ the port's read timeout)."""
+    def poll(self, timeout: float = 0.01) -> None:
+        """One iteration of the link thread: waits at most ``timeout`` s for bytes (less when the
+        link timeout comes first), then handles every frame that is there."""
         if not self.connected:
             if self.clock() >= self.next_attempt:
                 self.try_connect()
             else:
-                self.sleep(min(0.01, max(0.0, self.next_attempt - self.clock())))
+                self.sleep(min(timeout, max(0.0, self.next_attempt - self.clock())))
             return
         try:
-            frames = self._read_frames()
+            left = self.last_rx + self.cfg.link_timeout - self.clock()
+            frames = self._read_frames(min(timeout, max(0.0, left)))
             now = self.clock()
+            samples = 0
             for fr in frames:
                 self.last_rx = now
+                if self.last_frame_seq is not None:     # every frame the device sent has a seq
+                    self.counters.frames_lost += P.seq_gap(self.last_frame_seq, fr.seq)
+                self.last_frame_seq = fr.seq
                 if fr.type == P.SAMPLE:
-                    self._on_sample(fr)
+                    samples += 1
+                    self._on_sample(fr, now)
                 elif fr.type == P.ACK and fr.msg.result != P.R_OK:
                     self.counters.nacks += 1
+            if samples:
+                self._count_read(samples)
             if now - self.last_rx > self.cfg.link_timeout:
                 self.lose(f'device silent for {now - self.last_rx:.3f} s (link_timeout {self.cfg.link_timeout} s)')
         except OSError as exc:
             self.lose(f'port error: {exc}')
 
-    def _on_sample(self, fr: P.Frame) -> None:
+    def _count_read(self, samples: int) -> None:
+        c = self.counters
+        c.reads += 1
+        if samples > 1:
+            c.overruns += 1
+            c.max_backlog = max(c.max_backlog, samples)
+
+    def _sequence(self, s: P.Sample, now: float) -> Optional[int]:
+        """The seq of a sample (None: a duplicate, dropped). Call with the lock held."""
+        c = self.counters
+        if self.ros_base is not None:
+            d = (s.sample - self.dev_base) & MASK32
+            seq = self.ros_base + d
+            if s.sample == self.last_dev_sample:
+                c.duplicate_samples += 1
+                return None
+            if d < 0x80000000 and seq > self.last_seq:
+                c.samples_lost += seq - self.last_seq - 1
+                return seq
+            c.device_restarts += 1            # its counter went back: number on from here
+            self.ros_base = None
+            self.resume = Resume(self.last_seq, s.sample, now, self.hello.serial if self.hello else 0, 0.0)
+        seq = self._first_seq(s, now)
+        self.ros_base, self.dev_base = seq, s.sample
+        if self.trace is not None:
+            self.trace('drv.offset', seq - s.sample)   # device sample + offset = seq (for traces)
+        return seq
+
+    def _first_seq(self, s: P.Sample, now: float) -> int:
+        """The seq of the first sample of a connection: the device's counter on from where it
+        was when it is the same device and the counter advanced no more than the time allows,
+        else the time elapsed in samples; the gap is counted in ``outage_samples``."""
+        r = self.resume
+        if r is None:
+            return 0 if self.last_seq is None else self.last_seq + 1
+        elapsed = max(0.0, now - r.at)
+        d = (s.sample - r.dev_sample) & MASK32
+        same = (self.hello is not None and self.hello.serial == r.serial and r.period > 0
+                and 0 < d <= 2 * elapsed / r.period + 100)
+        gap = d if same else max(1, round(elapsed / self.period))
+        self.counters.outage_samples += gap - 1
+        return r.seq + gap
+
+    def _on_sample(self, fr: P.Frame, now: float) -> None:
         s: P.Sample = fr.msg
         c = self.counters
-        if self.last_frame_seq is not None:
-            c.frames_lost += P.seq_gap(self.last_frame_seq, fr.seq)
-        self.last_frame_seq = fr.seq
         with self.lock:
-            if self.ros_base is not None:
-                d = (s.sample - self.dev_base) & MASK32
-                seq = self.ros_base + d
-                if d >= 0x80000000 or seq <= self.last_seq:   # device counter went back: rebase
-                    self.ros_base = None
-            if self.ros_base is None:
-                self.ros_base = self.next_seq
-                self.dev_base = s.sample
-                seq = self.next_seq
-            elif seq > self.last_seq + 1:
-                c.samples_lost += seq - self.last_seq - 1
+            seq = self._sequence(s, now)
+            if seq is None:
+                return
             self.last_seq = seq
-            self.next_seq = seq + 1
+            self.last_sample_at = now
             self.last_dev_sample = s.sample
             self.last_sample = s
             c.samples += 1
+        if self.trace is not None:
+            self.trace('drv.rx', seq, int(now * 1e9))
+        if self.on_sample is not None:      # first: the bookkeeping can wait, the loop cannot
+            self.on_sample(seq, self.cfg.pendulum_sign * s.pendulum_counts, self.cfg.motor_sign * s.motor_counts,
+                           s, now)
+        self._device_report(s, now)
+        self._supervise(seq, s)
+
+    def _device_report(self, s: P.Sample, now: float) -> None:
+        """What the sample says about the link: its delay, the device's rx_bad, its watchdog."""
+        c = self.counters
+        delay = self.delay.delay_us(s.time_us, now * 1e6)
+        if delay > self.period * 1e6:
+            c.late_samples += 1
+        self.window_max_delay_us = max(self.window_max_delay_us, delay)
+        if self.last_rx_bad is not None:
+            c.device_rx_bad += (s.rx_bad - self.last_rx_bad) & 0xFFFF
+        self.last_rx_bad = s.rx_bad
         tripped = bool(s.status & P.ST_WATCHDOG)
         if tripped and not self.prev_tripped:
             c.watchdog_trips += 1
             self.log('warn', 'device watchdog tripped: motor at zero')
         self.prev_tripped = tripped
-        if self.on_sample is not None:
-            self.on_sample(seq, self.cfg.pendulum_sign * s.pendulum_counts, self.cfg.motor_sign * s.motor_counts, s)
-        self._supervise(seq, s)
 
     def _supervise(self, seq: int, s: P.Sample) -> None:
         """Keep the amplifier in the wanted state; PC-side command timeout."""
         enabled = bool(s.status & P.ST_ENABLED)
         now = self.clock()
-        if enabled != self.want_active and now - self.last_enable_tx > 0.05:
-            self._write(P.Enable(1 if self.want_active else 0))
-            self.last_enable_tx = now
-        if not (self.want_active and enabled):
-            return
         with self.lock:
+            if enabled != self.want_active and now - self.last_enable_tx > 0.05:
+                self._write(P.Enable(1 if self.want_active else 0))
+                self.last_enable_tx = now
+            if not (self.want_active and enabled):
+                return
             arrival = self.last_cmd_arrival
-            fresh = arrival is not None and seq - arrival < self.cfg.command_timeout_samples
-            if fresh:
+            if arrival is not None and seq - arrival < self.cfg.command_timeout_samples:
                 self.timed_out = False
                 return
             if not self.timed_out and arrival is not None:
                 self.counters.timeouts += 1
             self.timed_out = True
             self.counters.timeout_samples += 1
-            self._write(P.Command(s.sample, 0))     # PC-side timeout: explicit zero, keeps the watchdog fed
+            # PC-side timeout: an explicit zero (keeps the watchdog fed), answering the sample of
+            # the last command sent, so that the device still takes any newer one (as the
+            # simulator does: a late command less than the timeout old is applied)
+            self._write(P.Command(self.dev_base if self.last_cmd_dev is None else self.last_cmd_dev, 0))
+
+    def _remember_resume(self) -> None:
+        """Where this connection stopped, for the numbering of the next one. Lock held."""
+        if self.last_seq is not None and self.last_dev_sample is not None:
+            self.resume = Resume(self.last_seq, self.last_dev_sample, self.last_sample_at,
+                                 self.hello.serial if self.hello else 0, self.period)
 
     # ------------------------------------------------------------ from ROS
     def set_active(self, on: bool) -> None:
@@ -386,40 +538,59 @@ class DriverLink:
                 except OSError:
                     pass        # the link thread notices and reconnects
 
-    def _refuse(self, reason: str) -> tuple[bool, str]:
-        self.counters.commands_refused += 1
-        self.counters.last_refusal = reason
+    def _refuse(self, reason: str, counter: str = 'commands_refused') -> tuple[bool, str]:
+        c = self.counters
+        setattr(c, counter, getattr(c, counter) + 1)
+        c.last_refusal = reason
         return False, reason
 
     def command(self, seq: int, u: float) -> tuple[bool, str]:
-        """A MotorCommand answering published sample ``seq``; sent to the device when acceptable."""
+        """A MotorCommand answering published sample ``seq``; sent to the device at once when
+        acceptable (see the module doc for the rules)."""
         if not isinstance(u, (int, float)) or not math.isfinite(u):
             return self._refuse(f'non-finite u {u!r} (seq {seq})')
         with self.lock:
-            if not self.want_active:
-                self.counters.commands_inactive += 1
-                return False, 'not active'
-            if not self.connected or self.ros_base is None:
-                self.counters.commands_inactive += 1
-                return False, 'link down'
-            if seq > self.last_seq:
-                return self._refuse(f'command answers seq {seq}, newest sample is {self.last_seq}')
-            if seq < self.ros_base:
-                return self._refuse(f'command answers seq {seq}, from before the reconnection (seq {self.ros_base})')
-            if seq <= self.last_cmd_seq:
-                return self._refuse(f'stale command for seq {seq} (already sent {self.last_cmd_seq})')
+            why = self._check_command(seq)
+            if why is not None:
+                return why
             u_dev = self.cfg.motor_sign * float(u)
             if self.hello is not None and abs(u_dev) * P.U_SCALE > self.hello.u_max_milli:
                 self.counters.commands_saturated += 1
             dev_sample = (self.dev_base + (seq - self.ros_base)) & MASK32
             try:
-                self._write(P.Command(dev_sample, P.u_to_milli(u_dev)))
+                if self._write(P.Command(dev_sample, P.u_to_milli(u_dev))) < 0:
+                    return False, 'port full: frame dropped'
             except OSError as exc:
                 return False, f'port error: {exc}'
             self.last_cmd_seq = seq
+            self.last_cmd_dev = dev_sample
             self.last_cmd_arrival = self.last_seq
             self.counters.commands_sent += 1
-            return True, ''
+        if self.trace is not None:
+            self.trace('drv.tx', seq)
+        return True, ''
+
+    def _check_command(self, seq: int) -> Optional[tuple[bool, str]]:
+        """None when a command for ``seq`` is to be sent, else (False, reason). Lock held."""
+        if not self.want_active:
+            self.counters.commands_inactive += 1
+            return False, 'not active'
+        if not self.connected or self.ros_base is None:
+            self.counters.commands_inactive += 1
+            return False, 'link down'
+        if seq > self.last_seq:
+            return self._refuse(f'command answers seq {seq}, newest sample is {self.last_seq}')
+        if seq < self.ros_base:
+            return self._refuse(f'command answers seq {seq}, from before the reconnection (seq {self.ros_base})')
+        if seq <= self.last_cmd_seq:
+            return self._refuse(f'stale command for seq {seq} (already sent or zeroed {self.last_cmd_seq})',
+                                'stale_commands')
+        age = self.last_seq - seq
+        if age >= self.cfg.command_timeout_samples:
+            return self._refuse(f'old command for seq {seq}: {age} samples old at sample {self.last_seq} '
+                                f'(>= command_timeout_samples {self.cfg.command_timeout_samples})',
+                                'old_commands')
+        return None
 
     def close(self) -> None:
         with self.lock:
@@ -433,27 +604,43 @@ class DriverLink:
         self._close_port()
 
     # ------------------------------------------------------------ report
-    def snapshot(self) -> dict:
+    def counter_values(self) -> dict:
+        """The integer counters (and the parser's, as ``rx.*``): what :func:`health.assess` compares."""
         c = self.counters
-        s = self.last_sample
-        d = {
-            'port': self.cfg.port, 'connected': self.connected, 'active': self.want_active,
-            'error': self.error, 'fatal': self.fatal,
-            'silent_for': f'{self.clock() - self.last_rx:.3f}' if self.connected else '',
-            'connects': c.connects, 'link_losses': c.link_losses, 'failed_attempts': c.failed_attempts,
-            'samples': c.samples, 'samples_lost': c.samples_lost, 'frames_lost': c.frames_lost,
-            'commands_sent': c.commands_sent, 'commands_refused': c.commands_refused,
-            'commands_inactive': c.commands_inactive, 'commands_saturated': c.commands_saturated,
-            'last_refusal': c.last_refusal, 'timeout_samples': c.timeout_samples, 'timeouts': c.timeouts,
-            'command_timed_out': self.timed_out, 'watchdog_trips': c.watchdog_trips, 'nacks': c.nacks,
-        }
+        d = {f.name: getattr(c, f.name) for f in fields(c) if isinstance(getattr(c, f.name), int)}
         for k, v in self.parser_stats().items():
             d[f'rx.{k}'] = v
+        return d
+
+    def summary(self) -> str:
+        """One line for the log at the end: what the link did and what it could not do."""
+        c = self.counters
+        n = max(c.samples, 1)
+        return (f'{c.samples} samples ({c.samples_lost} lost, {c.outage_samples} in {c.link_losses} '
+                f'outage(s), {c.late_samples} = {100 * c.late_samples / n:.2f} % taken late, '
+                f'{c.overruns} reads behind), {c.frames_lost} frames lost, '
+                f'{sum(self.parser_stats().get(k, 0) for k in ("bad_crc", "truncated", "bad_length"))} corrupt; '
+                f'{c.commands_sent} commands sent, {c.old_commands} old and {c.stale_commands} stale refused, '
+                f'{c.tx_dropped} not written; the device refused {c.device_rx_bad} frames, its watchdog '
+                f'tripped {c.watchdog_trips} time(s)')
+
+    def take_window_max_delay_ms(self) -> float:
+        """The largest sample delay since the last call, ms (and start a new window)."""
+        m, self.window_max_delay_us = self.window_max_delay_us, 0.0
+        return m / 1000.0
+
+    def snapshot(self) -> dict:
+        c = self.counters
+        d = {'port': self.cfg.port, 'connected': self.connected, 'active': self.want_active,
+             'error': self.error, 'fatal': self.fatal,
+             'silent_for': f'{self.clock() - self.last_rx:.3f}' if self.connected else '',
+             **self.counter_values(), 'last_refusal': c.last_refusal, 'command_timed_out': self.timed_out}
         if self.hello is not None:
             h = self.hello
             d.update({'firmware': f'{h.fw_major}.{h.fw_minor}.{h.fw_patch}',
                       'protocol': f'{h.proto_major}.{h.proto_minor}', 'device_serial': f'{h.serial:#010x}',
                       'device_counts_per_rev': h.counts_per_rev_pendulum})
+        s = self.last_sample
         if s is not None:
             d.update({'device.sample': s.sample, 'device.time_us': s.time_us,
                       'device.status': ','.join(P.status_names(s.status)) or 'none',

@@ -10,3 +10,15 @@ def test_rt_priority_default_and_range():
     for bad in ('-1', '100', 'high'):
         with pytest.raises(SystemExit):
             parse_args(['--rt-priority', bad])
+
+
+def test_link_in_a_missing_directory_is_refused(tmp_path):
+    with pytest.raises(SystemExit):
+        parse_args(['--link', str(tmp_path / 'nowhere' / 'rig')])
+
+
+def test_sample_period_option():
+    assert parse_args([]).h is None and parse_args(['--h', '0.002']).h == 0.002
+    for bad in ('0', '-0.001', '5', 'nan'):
+        with pytest.raises(SystemExit):
+            parse_args(['--h', bad])

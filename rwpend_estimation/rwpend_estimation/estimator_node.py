@@ -6,120 +6,127 @@ sample ``state`` (StateEstimate, seq and header copied from the encoder sample) 
 ``publish_joint_states`` is false, ``joint_states`` (sensor_msgs/JointState, joints
 ``pendulum`` = theta and ``wheel`` = theta_r - theta, the wheel's angle relative to the
 pendulum, i.e. the joint coordinate of a base -> pendulum -> wheel chain).
-``~/reset`` (std_srvs/Trigger) re-zeros the encoders at the current counts.
-``/diagnostics`` once a second: estimator, samples, refused samples and commands, seq gaps.
+``~/reset`` (std_srvs/Trigger) re-zeros the encoders at the counts of the newest sample.
+``/diagnostics`` once a second: estimator, samples, refused samples and commands, gaps, bridged
+samples, the longest gap, re-synchronisations and the last one's reason; a log line (throttled)
+at each re-synchronisation.  StateEstimate carries ``resyncs`` and ``missed``.
 
 Every setting of :class:`rwpend_estimation.estimators.EstimatorConfig` is a ROS parameter of
 the same name, changeable while running: new values are validated in the on-set callback
 (refused with the reason) and applied in the post-set callback, where the new estimator
 continues from the current estimate without a jump (``switch_estimator``).
-Invalid samples (implausible jumps) and non-finite commands are counted and ignored.
+Implausible samples, repeated samples and non-finite commands are counted and ignored; gaps
+are bridged or re-synchronised (:mod:`rwpend_estimation.gaps`).
 
-All algorithms live in :mod:`rwpend_estimation.estimators` (pure, no rclpy).
+All algorithms live in :mod:`rwpend_estimation.estimators`, :mod:`.gaps` and, for the
+sample/command alignment, :mod:`.alignment` (pure, no rclpy).
 """
 from __future__ import annotations
 
-import math
 import struct
 from dataclasses import asdict, fields
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS, ConfigError, LocalPublisher, RwNode,
-                               SlackTimer, declare_rig, fast_path_values, local_subscription, publish_diagnostic,
-                               run_node, sample_time)
-from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, EstimatorConfig,
-                                          make_estimator, switch_estimator)
+from rwpend_ros.diagnostics import publish_diagnostic
+from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, local_subscription
+from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
+from rwpend_ros.paramspec import ParamSpec
+from rwpend_ros.qos import QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS
+from rwpend_ros.runner import run_node
+from rwpend_ros.simtime import sample_time
+from rwpend_estimation.alignment import CommandAlignment
+from rwpend_estimation.estimators import (ESTIMATORS, FRICTION_SOURCES, LIMITS, MAX_BRIDGE,
+                                          DuplicateSampleError, EstimatorConfig, make_estimator,
+                                          switch_estimator)
 
 DESCRIPTIONS = {
-    'estimator': 'estimator: ' + ', '.join(ESTIMATORS),
-    'T': 'time constant of the filtered difference (3.3), s',
+    'estimator': 'the estimator (Chapters 3 and 7)',
+    'T': 'time constant of the filtered difference (3.3), s (0 = plain difference)',
     'omega0': 'bandwidth of the wheel observers (3.6)/(3.10) and the joint observer (7.3), rad/s',
     'zeta': 'damping of the wheel observers and the joint observer',
     'alpha': 'friction pole alpha*omega0 of (3.10) and (7.3)',
     'pendulum_omega0': 'bandwidth of the nonlinear pendulum observer (7.1), rad/s',
     'pendulum_zeta': 'damping of the nonlinear pendulum observer (7.1)',
-    'friction_source': 'friction estimate: ' + ', '.join(FRICTION_SOURCES),
+    'friction_source': 'friction estimate in StateEstimate: the observer\'s, the model (3.17), none',
     'theta_offset': 'calibration added to theta (rad), pi if started upright',
-    'max_rate': 'samples implying a faster encoder motion (rad/s) are refused',
+    'max_rate': 'samples implying a faster encoder motion (rad/s) over the seq gap are refused',
+    'max_bridge': 'most missing samples bridged (observers stepped through them); longer gaps '
+                  're-synchronise on the counts',
+    'command_timeout_samples': "the plant's command timeout (samples): over a bridged gap the last "
+                               'command is held this long, then 0',
 }
 CONFIG_NAMES = tuple(f.name for f in fields(EstimatorConfig))
-EXTRA_PARAMS = {
-    'publish_joint_states': (True, 'publish sensor_msgs/JointState on joint_states'),
-}
-READ_ONLY_PARAMS = {
-    'diagnostics_period': (1.0, 'seconds between /diagnostics messages'),
-}
+_CHOICES = {'estimator': ESTIMATORS, 'friction_source': FRICTION_SOURCES}
+
+
+def _config_spec(name: str, default) -> ParamSpec:
+    """The parameter of one EstimatorConfig setting: bounds from estimators.LIMITS."""
+    if name in LIMITS:
+        lo, lo_incl, hi = LIMITS[name]
+        return ParamSpec(name, default, DESCRIPTIONS[name], low=lo, low_open=not lo_incl, high=hi,
+                         constraints='stable observers at h' if name in ('omega0', 'pendulum_omega0') else '')
+    if name in ('max_bridge', 'command_timeout_samples'):
+        return ParamSpec(name, default, DESCRIPTIONS[name], low=0, high=MAX_BRIDGE)
+    return ParamSpec(name, default, DESCRIPTIONS[name], choices=_CHOICES.get(name, ()))
+
+
+#: The estimator's parameters: every setting of EstimatorConfig and publish_joint_states
+#: (changeable while running), diagnostics_period (set at start).
+PARAMS = [_config_spec(name, default) for name, default in asdict(EstimatorConfig()).items()] + [
+    ParamSpec('publish_joint_states', True, 'publish sensor_msgs/JointState on joint_states'),
+    ParamSpec('diagnostics_period', 1.0, 'seconds between /diagnostics messages', low=0.0,
+              low_open=True, read_only=True),
+]
 
 
 class EstimatorNode(RwNode):
-    def __init__(self, **node_kwargs) -> None:
-        """node_kwargs go to rclpy Node (e.g. context, parameter_overrides, namespace) for tests."""
-        super().__init__('estimator', **node_kwargs)
-        self.rig = declare_rig(self)
-        self.sample_time = sample_time(self)   # lockstep: ROS time from the samples' stamps
-        defaults = asdict(EstimatorConfig())
-        for name in CONFIG_NAMES:
-            self.declare_parameter(name, defaults[name], ParameterDescriptor(
-                description=DESCRIPTIONS.get(name, name), dynamic_typing=True))
-        for name, (default, descr) in EXTRA_PARAMS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=descr,
-                                                                      dynamic_typing=True))
-        for name, (default, descr) in READ_ONLY_PARAMS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=descr, read_only=True,
-                                                                      dynamic_typing=True))
-        values = {name: self.get_parameter(name).value for name in CONFIG_NAMES}
+    def __init__(self, bus=None, **node_kwargs) -> None:
+        """``bus``: the in-process bus of a composed process (rwpend_ros.intra); node_kwargs go
+        to rclpy Node (e.g. context, parameter_overrides, namespace) for tests."""
+        super().__init__('estimator', bus=bus, **node_kwargs)
+        self.param_table = ParameterTable(self)
+        self.rig = declare_rig(self.param_table)
+        self.sample_time = sample_time(self, self.param_table)   # lockstep: ROS time from the samples' stamps
+        p = self.param_table.declare(PARAMS)
         try:
-            self.config = EstimatorConfig.from_values(values, rig=self.rig)
+            self.config = EstimatorConfig.from_values({n: p[n] for n in CONFIG_NAMES}, rig=self.rig)
         except ValueError as exc:
             raise ConfigError(f'estimator parameters: {exc}') from exc
-        pjs = self.get_parameter('publish_joint_states').value
-        if not isinstance(pjs, bool):
-            raise ConfigError(f'publish_joint_states must be a bool, got {pjs!r}')
-        self.publish_joint_states = pjs
-        period = self.get_parameter('diagnostics_period').value
-        if isinstance(period, bool) or not isinstance(period, (int, float)) or not (
-                math.isfinite(period) and period > 0):
-            raise ConfigError(f'diagnostics_period must be a number > 0, got {period!r}')
+        self.publish_joint_states = p['publish_joint_states']
+        period = p['diagnostics_period']
         self.est = make_estimator(None, self.rig, self.config)
-        self.u = 0.0             # latest command received (clamped), for diagnostics
-        self.u_seq = -1          # seq answered by the latest command
-        self.commands: dict[int, float] = {}   # recent commands by the seq they answer
-        self.pending: Sample | None = None
-        self.deferred = 0        # samples that waited for their command
-        self.u_max = self.rig.u_max
-        # counters
+        self.align: CommandAlignment[Sample] = CommandAlignment(self.rig.u_max)
+        # counters (the estimator's own: self.est.gap_stats)
         self.samples = 0
-        self.refused_samples = 0
+        self.malformed_samples = 0
         self.refused_commands = 0
-        self.seq_gaps = 0
-        self.last_seq: int | None = None
         self.last_error = ''
         self.switches = 0
+        self._resyncs_seen = 0
 
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         # state reaches a controller in this process directly (composed mode, rwpend_ros.intra)
         self.pub_state = LocalPublisher(self, StateEstimate, 'state', QOS_CONTROL_PUB)
-        self.pub_joints = LocalPublisher(self, JointState, 'joint_states', QOS_CONTROL_PUB)   # recorder: fast path
+        self.pub_joints = self.create_publisher(JointState, 'joint_states', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire): no message
-        # objects built or converted field by field (measured: PERFORMANCE.md)
-        # also straight from a plant / controller in another process of this host
-        # (rwpend_ros.hostbus). A command of a controller of this process comes through the
-        # in-process bus: published while this node publishes the state it answers, it is
-        # delivered right after that callback returns (rwpend_ros.intra: deferred), with no DDS
-        # copy. Encoders: from the sample loop of a simulator of this process (real time; in
-        # lockstep the simulator writes them to DDS, rwpend_sim.sim_node)
-        local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL)
-        self.command_topic = local_subscription(self, MotorCommand, 'command', self.on_command_raw,
-                                                QOS_CONTROL).topic_name
+        # objects built or converted field by field (measured: PERFORMANCE.md). A command of a
+        # controller of this process comes through the in-process bus: published while this
+        # node publishes the state it answers, it is delivered right after that callback returns
+        # (rwpend_ros.intra: deferred). Encoders: from the sample loop of a simulator of this
+        # process (real time; in lockstep the simulator writes them to DDS, rwpend_sim.sim_node).
+        # Each subscription's order gate drops duplicates and older messages (rwpend_ros.order)
+        self.sub_enc = local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL)
+        self.sub_cmd = local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL)
+        self.command_topic = self.sub_cmd.topic_name
         self.create_service(Trigger, '~/reset', self.on_reset)
         # in the loop's slack: after the state of a sample, not while a sample waits (19.)
         self.diag_timer = SlackTimer(self, float(period), self.publish_diagnostics)
@@ -179,20 +186,14 @@ class EstimatorNode(RwNode):
         self.command(seq, u)
 
     def command(self, seq: int, u: float) -> None:
-        if not math.isfinite(u):
+        try:
+            released = self.align.command(seq, u)
+        except ValueError as exc:
             self.refused_commands += 1
-            self.last_error = f'non-finite command u={u!r} ignored'
+            self.last_error = str(exc)
             return
-        um = self.u_max
-        self.u = um if u > um else (-um if u < -um else u)
-        self.commands[seq] = self.u
-        if len(self.commands) > 64:
-            del self.commands[next(iter(self.commands))]
-        self.u_seq = max(self.u_seq, seq)
-        p = self.pending
-        if p is not None and self.u_seq >= p.seq - 1:
-            self.pending = None
-            self.process(p)
+        if released is not None:
+            self.process(*released)
 
     def on_encoders(self, msg: EncoderCounts) -> None:
         st = msg.header.stamp
@@ -205,7 +206,7 @@ class EstimatorNode(RwNode):
         try:
             msg = Sample(*wire.unpack_encoders(data))
         except (struct.error, IndexError) as exc:   # truncated bytes: counted, nothing else changes
-            self.refused_samples += 1
+            self.malformed_samples += 1
             self.last_error = f'malformed encoder sample: {exc}'
             return
         if self.trace is not None:
@@ -214,55 +215,33 @@ class EstimatorNode(RwNode):
 
     def sample(self, msg: 'Sample') -> None:
         """Sample k is estimated with the command that answered sample k-1 (held over
-        [t_{k-1}, t_k), the u of (3.5)/(7.1)). The two arrive on different topics from different
-        processes, in either order; while the controller is answering (its last command is at
-        most 3 samples old) sample k waits for command k-1 -- until that command or sample k+1
-        arrives, whichever is first. So a lockstep run gives the same estimates every time."""
-        p = self.pending
-        if p is not None:
-            self.pending = None
-            self.process(p)
-        if self.u_seq < msg.seq - 1 and self.u_seq >= msg.seq - 4 and (
-                self.u_seq >= 0 or self.count_publishers(self.command_topic) > 0):
-            # no command yet (u_seq -1: start, plant restarted) counts as answered at seq -1
-            # when a controller publishes: samples 1-3 then wait for the first commands too (in
-            # a composed lockstep run sample 1 can come before command 0, rwpend_ros.intra)
-            self.pending = msg
-            self.deferred += 1
-            return
-        self.process(msg)
+        [t_{k-1}, t_k), the u of (3.5)/(7.1)); it may wait for it (rwpend_estimation.alignment)."""
+        for seq, s in self.align.sample(msg.seq, msg, self._controller_present):
+            self.process(seq, s)
 
-    def command_for(self, k: int) -> float:
-        """The u held over [t_{k-1}, t_k): the command answering sample k-1, else the newest one
-        answering an earlier sample (the amplifier holds it), else 0. Chosen by seq, not by
-        arrival order, so a replayed stream gives the live estimates whatever the interleaving
-        of the two topics."""
-        u = self.commands.get(k - 1)
-        if u is not None:
-            return u
-        older = [s for s in self.commands if s < k]
-        return self.commands[max(older)] if older else 0.0
+    def _controller_present(self) -> bool:
+        return self.count_publishers(self.command_topic) > 0
 
-    def process(self, msg: 'Sample') -> None:
-        if self.last_seq is not None and msg.seq < self.last_seq:
-            # the plant restarted its sample counter (driver reconnect, simulator restart)
-            self.commands.clear()
-            self.u_seq = -1
+    def process(self, seq: int, msg: 'Sample') -> None:
         try:
-            e = self.est.step(msg.pendulum_counts, msg.motor_counts, self.command_for(int(msg.seq)))
+            e = self.est.step(msg.pendulum_counts, msg.motor_counts, self.align.input_for(seq), seq)
+        except DuplicateSampleError:
+            return                                  # counted in gap_stats
         except ValueError as exc:
-            self.refused_samples += 1
-            self.last_error = f'seq {msg.seq}: {exc}'
+            self.last_error = f'seq {seq}: {exc}'
             self.get_logger().warn(self.last_error, throttle_duration_sec=1.0)
             return
         self.samples += 1
-        if self.last_seq is not None and msg.seq != self.last_seq + 1:
-            self.seq_gaps += 1
-        self.last_seq = msg.seq
+        if e.resyncs != self._resyncs_seen:
+            self._resyncs_seen = e.resyncs
+            gs = self.est.gap_stats
+            self.get_logger().warn(f'seq {seq}: re-synchronised on the counts ({gs.last_resync}); '
+                                   f'{gs.resyncs} re-synchronisations so far', throttle_duration_sec=1.0)
         if self.trace is not None:
-            self.trace('est.pub', msg.seq)
+            self.trace('est.pub', seq)
         self.pub_state.publish(self.state_packer.pack(
-            msg.header, msg.seq, e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate, e.friction, e.energy))
+            msg.header, seq, e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate, e.friction, e.energy,
+            e.resyncs, e.missed))
         if self.publish_joint_states:
             self.pub_joints.publish(self.joint_packer.pack(
                 msg.header, e.theta, e.wheel_angle - e.theta, e.theta_dot, e.wheel_rate - e.theta_dot))
@@ -271,15 +250,19 @@ class EstimatorNode(RwNode):
     def on_reset(self, req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         self.est.reset()
         resp.success = True
-        resp.message = (f'encoders re-zeroed at counts {self.est.raw_counts}' if self.est.raw_counts
+        n = self.est.newest_sample
+        resp.message = (f'encoders re-zeroed at counts {n[1:]} of seq {n[0]}' if n is not None
                         else 'encoders will be zeroed at the first sample')
         self.get_logger().info(resp.message)
         return resp
 
     def publish_diagnostics(self) -> None:
+        gs = self.est.gap_stats
         level = DiagnosticStatus.OK
         message = f'{self.config.estimator}: ok'
-        if self.refused_samples or self.refused_commands:
+        if gs.resyncs:
+            message = f'{self.config.estimator}: {gs.resyncs} re-synchronisations, last: {gs.last_resync}'
+        if gs.refused or self.malformed_samples or self.refused_commands:
             level = DiagnosticStatus.WARN
             message = f'{self.config.estimator}: {self.last_error}'
         if self.samples == 0:
@@ -290,12 +273,22 @@ class EstimatorNode(RwNode):
                 'estimator': self.config.estimator,
                 'friction_source': self.config.friction_source,
                 'samples': self.samples,
-                'refused_samples': self.refused_samples,
+                'refused_samples': gs.refused,
+                'duplicate_samples': gs.duplicates,
+                'malformed_samples': self.malformed_samples,
                 'refused_commands': self.refused_commands,
-                'seq_gaps': self.seq_gaps,
-                'deferred_samples': self.deferred,
+                'seq_gaps': gs.gaps,
+                'missed_samples': gs.missed,
+                'bridged_samples': gs.bridged,
+                'longest_gap': gs.longest_gap,
+                'resyncs': gs.resyncs,
+                'last_resync': gs.last_resync,
+                'last_resync_seq': '' if gs.last_resync_seq is None else gs.last_resync_seq,
+                'deferred_samples': self.align.deferred,
+                'plant_restarts': self.align.restarts,
                 'switches': self.switches,
-                **fast_path_values(self),
+                'encoders_order': self.sub_enc.summary(),
+                'command_order': self.sub_cmd.summary(),
             })
 
 

@@ -12,7 +12,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate  # noqa: E402
-from rwpend_ros.common import QOS_CONTROL  # noqa: E402
+from rwpend_ros.qos import QOS_CONTROL
 from rwpend_estimation.estimator_node import EstimatorNode  # noqa: E402
 
 
@@ -35,6 +35,14 @@ def graph():
     rclpy.shutdown(context=ctx)
 
 
+def sample(seq, **counts):
+    """EncoderCounts stamped as a plant stamps them: 100 + seq s (the order gate wants stamps
+    that do not go back)."""
+    m = EncoderCounts(seq=seq, **counts)
+    m.header.stamp.sec = 100 + seq
+    return m
+
+
 def spin_until(ex, cond, timeout=5.0):
     import time
     end = time.monotonic() + timeout
@@ -52,47 +60,64 @@ def test_node_publishes_refuses_and_switches(graph):
     pub_cmd = tester.create_publisher(MotorCommand, 'command', QOS_CONTROL)
     assert spin_until(ex, lambda: pub_enc.get_subscription_count() > 0
                       and tester.count_subscribers(pub_cmd.topic_name) > 0)
-    pub_cmd.publish(MotorCommand(u=float('nan')))
-    pub_cmd.publish(MotorCommand(u=25.0))
-    assert spin_until(ex, lambda: node.refused_commands == 1 and node.u == 10.0)
-    for k in range(5):
-        m = EncoderCounts(seq=k, pendulum_counts=2 * k, motor_counts=5 * k)
+    pub_cmd.publish(MotorCommand(seq=0, u=float('nan')))
+    pub_cmd.publish(MotorCommand(seq=1, u=25.0))
+    assert spin_until(ex, lambda: node.refused_commands == 1 and node.align.u == 10.0)
+    for k in range(2, 7):
+        m = EncoderCounts(seq=k, pendulum_counts=2 * (k - 2), motor_counts=5 * (k - 2))
         m.header.stamp.sec = 100 + k
         pub_enc.publish(m)
-        assert spin_until(ex, lambda: len(states) == k + 1 and len(joints) == k + 1)
+        assert spin_until(ex, lambda: len(states) == k - 1 and len(joints) == k - 1)
         # answer the sample like a controller (the estimator waits for command k-1)
         pub_cmd.publish(MotorCommand(seq=k, u=25.0))
-        assert spin_until(ex, lambda: node.u_seq == k)
+        assert spin_until(ex, lambda: node.align.u_seq == k)
     s = states[-1]
-    assert (s.seq, s.header.stamp.sec, s.estimator) == (4, 104, 'joint5')
+    assert (s.seq, s.header.stamp.sec, s.estimator) == (6, 106, 'joint5')
     assert s.theta == pytest.approx(8 * node.rig.count_angle)
     assert joints[-1].name == ['pendulum', 'wheel']
     assert joints[-1].position[1] == pytest.approx(20 * node.rig.count_angle)   # relative wheel joint
+    assert (s.resyncs, s.missed) == (0, 0)
     # absurd sample: counted, ignored
-    pub_enc.publish(EncoderCounts(seq=5, pendulum_counts=10 ** 8, motor_counts=0))
-    assert spin_until(ex, lambda: node.refused_samples == 1)
+    pub_enc.publish(sample(7, pendulum_counts=10 ** 8, motor_counts=0))
+    assert spin_until(ex, lambda: node.est.gap_stats.refused == 1)
     # parameters: refused with the reason, accepted ones switch without a jump
     res = node.set_parameters([Parameter('zeta', value=float('nan'))])[0]
-    assert not res.successful and 'zeta must be finite' in res.reason
+    assert not res.successful and 'zeta out of range' in res.reason   # rclpy's range check
     res = node.set_parameters([Parameter('estimator', value='kalman')])[0]
     assert not res.successful and 'estimator must be one of' in res.reason
     assert node.config.estimator == 'joint5'
     assert node.set_parameters([Parameter('estimator', value='filtered')])[0].successful
     assert node.est.name == 'filtered'
     assert node.set_parameters([Parameter('publish_joint_states', value=False)])[0].successful
-    pub_enc.publish(EncoderCounts(seq=5, pendulum_counts=10, motor_counts=25))
+    pub_cmd.publish(MotorCommand(seq=7, u=25.0))
+    assert spin_until(ex, lambda: node.align.u_seq == 7)
+    pub_enc.publish(sample(8, pendulum_counts=10, motor_counts=25))
     assert spin_until(ex, lambda: len(states) == 6)
     assert states[-1].estimator == 'filtered'
     assert states[-1].theta - s.theta == pytest.approx(2 * node.rig.count_angle)
     assert math.isfinite(states[-1].theta_dot)
     assert len(joints) == 5
-    pub_cmd.publish(MotorCommand(seq=5, u=25.0))
-    assert spin_until(ex, lambda: node.u_seq == 5)
+    pub_cmd.publish(MotorCommand(seq=8, u=25.0))
+    assert spin_until(ex, lambda: node.align.u_seq == 8)
     # ~/reset
     cli = tester.create_client(Trigger, node.get_fully_qualified_name() + '/reset')
     assert spin_until(ex, cli.service_is_ready)
     fut = cli.call_async(Trigger.Request())
     assert spin_until(ex, fut.done) and fut.result().success
-    pub_enc.publish(EncoderCounts(seq=6, pendulum_counts=11, motor_counts=25))
+    pub_enc.publish(sample(9, pendulum_counts=11, motor_counts=25))
     assert spin_until(ex, lambda: len(states) == 7)
     assert states[-1].theta == pytest.approx(node.rig.count_angle)
+    assert states[-1].resyncs == 1                 # the reset re-initialised the estimate
+    # a gap too long to bridge: re-synchronised on the counts, visible in the state
+    pub_enc.publish(sample(600, pendulum_counts=111, motor_counts=25))
+    assert spin_until(ex, lambda: len(states) == 8)
+    assert (states[-1].resyncs, states[-1].missed) == (2, 590)
+    assert states[-1].theta == pytest.approx(101 * node.rig.count_angle)
+    gs = node.est.gap_stats
+    assert gs.longest_gap == 590 and 'gap of 590' in gs.last_resync and gs.refused == 1
+    # a short gap is bridged
+    pub_enc.publish(sample(601, pendulum_counts=112, motor_counts=25))
+    pub_enc.publish(sample(605, pendulum_counts=116, motor_counts=25))
+    assert spin_until(ex, lambda: len(states) == 10)
+    assert (states[-1].resyncs, states[-1].missed) == (2, 3)
+    assert node.est.gap_stats.bridged == 1 + 3     # the refused seq 7 and these

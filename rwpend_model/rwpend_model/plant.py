@@ -19,6 +19,13 @@ Equations (2.11) in the normalized form (2.15), theta measured from hanging (Sec
 * c_p: viscous pendulum-axis friction, 1 / (energy time constant), Fig. 2.3 (~1 min).
 * d: external torque on the pendulum in control units, entering as +b_p d (ERRATA E20).
 
+Chapter 3 configuration (``bracket``, Fig. 3.1): the motor and wheel on the fixed bracket, the
+pendulum locked hanging (theta = theta' = 0 for ever, taps and d do nothing); only the wheel
+moves, theta_r'' = b_r (tau - F(theta_r')) (3.1) with the same friction and stiction (at rest the
+bearing holds up to the breakaway level).  ``rotor_locked`` (with ``bracket``) holds the wheel
+by a torque meter (Experiment 2, Fig. 2.4): the wheel never turns, the bearing takes what it can
+of the torque (``friction`` = tau clamped to +-breakaway) and the meter the rest, k_u (tau - F).
+
 Integration: classical Runge-Kutta 4 on sub-steps of at most 0.2 ms (the motor lag is the
 exact exponential response inside a sample), with event handling of the stick/slip
 transitions at the sub-step boundaries.  Energy drift with friction and input off:
@@ -63,7 +70,14 @@ class Plant:
     def __init__(self, rig: Rig, *, theta: float = 0.0, theta_dot: float = 0.0,
                  wheel_angle: float = 0.0, wheel_rate: float = 0.0, friction: bool = True,
                  pendulum_friction: bool | None = None, motor_lag: bool = True,
-                 pwm: bool = True, back_emf: bool = True) -> None:
+                 pwm: bool = True, back_emf: bool = True, bracket: bool = False,
+                 rotor_locked: bool = False) -> None:
+        if rotor_locked and not bracket:
+            raise ValueError('rotor_locked (the torque meter of Experiment 2) needs bracket')
+        if bracket and (theta != 0.0 or theta_dot != 0.0):
+            raise ValueError('bracket: the pendulum is locked hanging, theta and theta_dot must be 0')
+        if rotor_locked and wheel_rate != 0.0:
+            raise ValueError('rotor_locked: the wheel is held, wheel_rate must be 0')
         for name, v in (('theta', theta), ('theta_dot', theta_dot), ('wheel_angle', wheel_angle),
                         ('wheel_rate', wheel_rate)):
             if not math.isfinite(v):
@@ -74,6 +88,8 @@ class Plant:
         self.motor_lag = bool(motor_lag) and rig.motor_time_constant > 0
         self.pwm = bool(pwm) and rig.pwm_steps > 0
         self.back_emf = bool(back_emf)
+        self.bracket = bool(bracket)
+        self.rotor_locked = bool(rotor_locked)
         self.h = rig.sample_period
         n = max(1, math.ceil(self.h / MAX_SUBSTEP - 1e-9))
         self._n = n
@@ -116,9 +132,23 @@ class Plant:
         """Impulsive tap on the pendulum: theta' jumps by dv (rad/s); the rotor slips."""
         if not math.isfinite(dv):
             raise ValueError(f'tap must be finite, got {dv!r}')
+        if self.bracket:
+            raise ValueError('bracket: the pendulum is locked, it cannot be tapped')
         self._x[1] += dv
         if dv != 0.0:
             self._stuck = False
+
+    def hold(self, theta: float) -> None:
+        """A hand holds the pendulum still at ``theta`` (rad from hanging) and lets go -- the
+        student steadying it between steps, or lifting it for the free swing of Experiment 1: the
+        rotor comes to rest with it, its angle relative to the pendulum kept, stuck again."""
+        if not math.isfinite(theta):
+            raise ValueError(f'hold angle must be finite, got {theta!r}')
+        if self.bracket:
+            raise ValueError('bracket: the pendulum is locked, it cannot be held elsewhere')
+        th, _, thr, _ = self._x
+        self._x = [float(theta), 0.0, thr - th + float(theta), 0.0]
+        self._stuck = self.friction_on
 
     # ------------------------------------------------------------------ model
     def _kinetic_friction(self, w: float) -> float:
@@ -138,6 +168,11 @@ class Plant:
         """(theta'', theta_r'', F) for the given state and applied torque."""
         w = thrd - thd
         tau = self._torque_available(tau, w)
+        if self.bracket:   # Fig. 3.1: pendulum locked, theta'' = 0; the wheel alone (3.1)
+            if stuck:
+                return 0.0, 0.0, tau
+            f = self._kinetic_friction(w) if self.friction_on else 0.0
+            return 0.0, self._br * (tau - f), f
         grav = -self._a * math.sin(th) + self._bp * self.disturbance - self._cp * thd
         if stuck:
             acc = grav * self._stuck_gain
@@ -153,6 +188,9 @@ class Plant:
         """Advance one sample period h with the command u held (ZOH)."""
         u = self.quantize_command(u)
         self.u_held = u
+        if self.rotor_locked:
+            self._step_locked(u)
+            return
         dt = self._dt
         te = self._te
         decay = math.exp(-dt / te) if te > 0 else 0.0
@@ -197,7 +235,7 @@ class Plant:
                 if self.friction_on and (w0 == 0.0 or w1 == 0.0 or (w0 > 0.0) != (w1 > 0.0)):
                     # relative speed crossed zero: stick if the bearing can hold the rotor
                     if abs(self._required_friction(th, thd, tau1)) <= fb:
-                        j_ratio = self._stuck_gain             # J / (J + J_r)
+                        j_ratio = 1.0 if self.bracket else self._stuck_gain   # J / (J + J_r)
                         v = j_ratio * thd + (1.0 - j_ratio) * thrd   # momentum-conserving
                         thd = thrd = v
                         stuck = True
@@ -213,6 +251,20 @@ class Plant:
             self._friction = self._kinetic_friction(w) if self.friction_on else 0.0
         self._tau_eff = tau_eff
         self.t += self.h
+
+    def _step_locked(self, u: float) -> None:
+        """One sample with the wheel held by the torque meter: only the current lag moves."""
+        te = self._te
+        tau = u + (self._tau - u) * math.exp(-self.h / te) if te > 0 else u
+        fb = self._fbreak if self.friction_on else 0.0
+        self._tau = self._tau_eff = tau
+        self._friction = max(-fb, min(fb, tau))
+        self._stuck = True
+        self.t += self.h
+
+    def meter_torque(self) -> float:
+        """What the torque meter of ``rotor_locked`` reads (Nm): k_u (tau - F) (Experiment 2)."""
+        return self.rig.k_u * (self._tau - self._friction) if self.rotor_locked else 0.0
 
     # ------------------------------------------------------------------ outputs
     @property

@@ -195,11 +195,45 @@ class Rig:
         return cls(**coerced)
 
 
-#: Fields that may be zero (switches: 0 = off).
-_MAY_BE_ZERO = {'pwm_steps', 'pendulum_energy_time_constant', 'friction_coulomb_pos',
-                'friction_viscous_pos', 'friction_coulomb_neg', 'friction_viscous_neg',
-                'friction_breakaway', 'motor_time_constant'}
-_INT_FIELDS = {'pwm_steps', 'counts_per_rev'}
+#: Fields that may be zero (switches: 0 = off); every other field must be > 0.
+MAY_BE_ZERO = frozenset({'pwm_steps', 'pendulum_energy_time_constant', 'friction_coulomb_pos',
+                         'friction_viscous_pos', 'friction_coulomb_neg', 'friction_viscous_neg',
+                         'friction_breakaway', 'motor_time_constant'})
+#: Integer fields.
+INT_FIELDS = frozenset({'pwm_steps', 'counts_per_rev'})
+#: Accepted sample periods h (s).
+SAMPLE_PERIOD_LIMITS = (1e-5, 0.1)
+
+#: What each field is, with its unit and where the book has it (the ``rig.*`` parameters'
+#: descriptions; the values are in rig.yaml).
+DESCRIPTIONS = {
+    'g': 'gravity, m/s^2 (the book\'s systpar listing has 9.91, ERRATA E01)',
+    'm_p': 'pendulum mass, kg (Section 2.6)',
+    'm_r': 'rotor (wheel + motor rotor) mass, kg',
+    'l_p': 'pivot to the pendulum\'s centre of mass, m',
+    'l_r': 'pivot to the rotor\'s centre of mass, m',
+    'j_p': 'pendulum inertia about its centre of mass, kg m^2',
+    'j_r': 'rotor inertia about its axis, kg m^2',
+    'k_m': 'motor torque constant = back-EMF constant, Nm/A (Section 2.4)',
+    'r_a': 'armature resistance, ohm',
+    'l_a': 'armature inductance, H',
+    'i_max': 'amplifier current limit (u = u_max), A',
+    'v_max': 'amplifier voltage, V: back-EMF cut-off at v_max/k_m (2.13, ERRATA E03)',
+    'k_u': 'torque of one control unit, Nm (2.14, Fig. 2.4; ERRATA E02/E04)',
+    'u_max': 'command limit, control units (|u| <= u_max)',
+    'motor_time_constant': 'T_e of the current loop (first-order lag), s; 0 = none',
+    'pwm_steps': 'PWM duty resolution per polarity (Section 2.5); 0 = no quantization',
+    'counts_per_rev': 'encoder counts per revolution, both encoders (Section 3.1)',
+    'sample_period': 'sampling period h, s',
+    'friction_coulomb_pos': 'rotor friction (3.17) for w_rel > 0: Coulomb part, control units',
+    'friction_viscous_pos': 'rotor friction (3.17) for w_rel > 0: viscous part, control units per rad/s',
+    'friction_coulomb_neg': 'rotor friction (3.17) for w_rel < 0: Coulomb part, control units',
+    'friction_viscous_neg': 'rotor friction (3.17) for w_rel < 0: viscous part, control units per rad/s',
+    'friction_breakaway': 'torque across the rotor bearing below which the rotor sticks to the '
+                          'pendulum, control units (Fig. 2.2, 2.4)',
+    'pendulum_energy_time_constant': 'pendulum-axis friction: energy decay time constant, s '
+                                     '(Fig. 2.3: about 1 min); 0 = no pendulum friction',
+}
 
 
 def validate_rig_values(values: Mapping[str, Any]) -> list[str]:
@@ -212,17 +246,18 @@ def validate_rig_values(values: Mapping[str, Any]) -> list[str]:
         if not math.isfinite(value):
             errors.append(f'rig.{name} must be finite, got {value!r}')
             continue
-        if name in _INT_FIELDS and float(value) != int(value):
+        if name in INT_FIELDS and float(value) != int(value):
             errors.append(f'rig.{name} must be an integer, got {value!r}')
-        if name in _MAY_BE_ZERO:
+        if name in MAY_BE_ZERO:
             if value < 0:
                 errors.append(f'rig.{name} must be >= 0, got {value!r}')
         elif value <= 0:
             errors.append(f'rig.{name} must be > 0, got {value!r}')
     if 'sample_period' in values and not errors:
         h = float(values['sample_period'])
-        if not 1e-5 <= h <= 0.1:
-            errors.append(f'rig.sample_period must be within [1e-5, 0.1] s, got {h!r}')
+        lo, hi = SAMPLE_PERIOD_LIMITS
+        if not lo <= h <= hi:
+            errors.append(f'rig.sample_period must be within [{lo:g}, {hi:g}] s, got {h!r}')
     return errors
 
 
@@ -274,6 +309,56 @@ def load_rig(path: str | Path | None = None, overrides: Mapping[str, Any] | None
               if k.startswith(PARAM_PREFIX)}
     params.update(overrides or {})
     return Rig.from_params(params)
+
+
+def load_rig_file(path: str | Path) -> Rig:
+    """The rig of a complete rig YAML (``--rig FILE``, ``--plant-rig FILE``, an identified rig).
+
+    Unlike :func:`load_rig` nothing is taken from the shipped file: every field of :class:`Rig`
+    must be in the file's ``/**`` section under ``rig:``, and no other key may be there (a
+    missing key would silently become the book's value in every node).  ValueError naming the
+    file and the keys otherwise."""
+    params = read_params_file(path)
+    names = {f.name for f in fields(Rig)}
+    given = {k[len(PARAM_PREFIX):] if k.startswith(PARAM_PREFIX) else k: v for k, v in params.items()}
+    unknown = sorted(k for k in given if k not in names)
+    missing = sorted(names - set(given))
+    problems = []
+    if unknown:
+        problems.append('unknown key(s) ' + ', '.join(unknown))
+    if missing:
+        problems.append('missing rig key(s) ' + ', '.join(missing))
+    if problems:
+        raise ValueError(f'{path}: ' + '; '.join(problems) + ' (a rig file has every key of '
+                         f'{default_rig_file()} under /**: ros__parameters: rig:)')
+    try:
+        return Rig.from_params(params)
+    except ValueError as exc:
+        raise ValueError(f'{path}: {exc}') from None
+
+
+#: Derived model parameters compared by :func:`rig_differences` besides the data ((2.15)).
+DERIVED = ('a', 'b_p', 'b_r', 'omega_p')
+
+
+def rig_differences(model: Rig, truth: Rig, rel: float = 1e-9) -> list[tuple[str, float, float]]:
+    """(name, model value, truth value) of every field -- and derived a, b_p, b_r, omega_p of
+    (2.15) -- in which ``truth`` differs from ``model`` by more than ``rel`` (relative)."""
+    out = []
+    for name in [f.name for f in fields(Rig)] + list(DERIVED):
+        m, t = float(getattr(model, name)), float(getattr(truth, name))
+        if abs(t - m) > rel * max(abs(m), abs(t)):
+            out.append((name, m, t))
+    return out
+
+
+def format_differences(diffs: list[tuple[str, float, float]]) -> str:
+    """'m_p 0.2164 -> 0.24886 (+15.0 %), ...' ('' when there are none)."""
+    parts = []
+    for name, m, t in diffs:
+        pct = f' ({100 * (t - m) / m:+.1f} %)' if m else ''
+        parts.append(f'{name} {m:.6g} -> {t:.6g}{pct}')
+    return ', '.join(parts)
 
 
 def book_rig(**changes: Any) -> Rig:

@@ -128,3 +128,55 @@ def test_tap_and_invalid_initial_state():
         p.tap(float('inf'))
     with pytest.raises(ValueError):
         Plant(book_rig(), theta=float('nan'))
+
+
+# ---------------------------------------------------------------- complete rig files (--rig, --plant-rig)
+def _rig_text(drop: str = '', extra: str = '') -> str:
+    from rwpend_model.rig import default_rig_file
+    lines = [ln for ln in default_rig_file().read_text().splitlines()
+             if not (drop and ln.strip().startswith(drop + ':'))]
+    return '\n'.join(lines + ([f'      {extra}'] if extra else [])) + '\n'
+
+
+def test_load_rig_file_reads_a_complete_file(tmp_path):
+    from rwpend_model.rig import load_rig_file
+    f = tmp_path / 'rig.yaml'
+    f.write_text(_rig_text())
+    assert load_rig_file(f) == load_rig()
+
+
+@pytest.mark.parametrize('drop, extra, match', [('friction_breakaway', '', 'missing rig key.*friction_breakaway'),
+                                                ('', 'm_wheel: 0.1', 'unknown key.*m_wheel')])
+def test_load_rig_file_refuses_missing_and_unknown_keys(tmp_path, drop, extra, match):
+    """A missing key would silently become the book's value in every node: refused, named."""
+    from rwpend_model.rig import load_rig_file
+    f = tmp_path / 'rig.yaml'
+    f.write_text(_rig_text(drop, extra))
+    with pytest.raises(ValueError, match=match):
+        load_rig_file(f)
+
+
+def test_rig_differences_name_data_and_derived_values():
+    from rwpend_model.rig import format_differences, rig_differences
+    base = load_rig()
+    heavy = base.replace(m_p=base.m_p * 1.15)
+    diffs = rig_differences(base, heavy)
+    names = [d[0] for d in diffs]
+    assert names[0] == 'm_p' and {'a', 'b_p'} <= set(names) and 'b_r' not in names
+    assert 'm_p 0.2164 -> 0.24886 (+15.0 %)' in format_differences(diffs)
+    assert rig_differences(base, base) == [] and format_differences([]) == ''
+
+
+def test_a_hand_holds_the_pendulum_and_lets_go():
+    p = Plant(book_rig(), wheel_rate=30.0)
+    for _ in range(50):
+        p.step(0.0)
+    rel = p.state.wheel_angle - p.state.theta
+    p.hold(0.35)
+    s = p.state
+    assert (s.theta, s.theta_dot, s.wheel_rate, s.stuck) == (0.35, 0.0, 0.0, True)
+    assert s.wheel_angle - s.theta == pytest.approx(rel)
+    p.step(0.0)
+    assert p.state.theta < 0.35, 'released: it swings'
+    with pytest.raises(ValueError):
+        p.hold(float('nan'))

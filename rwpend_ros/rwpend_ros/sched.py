@@ -1,5 +1,5 @@
 """Process priority and CPU affinity. Pure (no rclpy): used by the nodes (through
-rwpend_ros.common) and by the rig emulator, which is not a ROS node."""
+rwpend_ros.runner) and by the rig emulator, which is not a ROS node."""
 from __future__ import annotations
 
 import os
@@ -54,6 +54,40 @@ def apply_scheduling(environ: Mapping[str, str] | None = None) -> dict:
         except (OSError, ValueError, AttributeError) as exc:
             done['cpus'] = f'not permitted ({exc})'
     return done
+
+
+def realtime_permitted(priority: int = 50) -> tuple[bool, str]:
+    """Whether this process may use SCHED_FIFO at ``priority`` (what ``--rt-priority`` needs), and
+    why not: tried on a short-lived thread of its own, so nothing else changes."""
+    result: list = []
+
+    def probe():
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+            result.append('')
+        except (OSError, AttributeError, ValueError) as exc:
+            result.append(str(exc) or type(exc).__name__)
+    import threading
+    t = threading.Thread(target=probe, name='rt-probe')
+    t.start()
+    t.join()
+    return (result == ['']), (result[0] if result else 'no result')
+
+
+def raise_thread_priority(step: int = 1) -> str:
+    """The calling thread (on Linux a policy is per thread) ``step`` real-time priorities above
+    its process's SCHED_FIFO priority, so it runs ahead of the process's other threads and of the
+    other loop processes at the same priority (e.g. the serial driver's link thread, which must
+    take each sample as it comes). Nothing when the thread is not SCHED_FIFO or it is not
+    permitted. Returns what it did, for diagnostics."""
+    try:
+        if os.sched_getscheduler(0) != os.SCHED_FIFO:
+            return 'not real-time'
+        prio = min(os.sched_getparam(0).sched_priority + step, os.sched_get_priority_max(os.SCHED_FIFO))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+        return f'SCHED_FIFO {prio}'
+    except (OSError, AttributeError) as exc:
+        return f'not changed ({exc})'
 
 
 #: The kernel's PM QoS interface for the CPU wake-up latency (Documentation/power/pm_qos_interface.rst).

@@ -15,8 +15,9 @@ kills, against 8 stalls of 0.33-3 s in 168 kills over shared memory (PERFORMANCE
   default) rmw_fastrtps would add shared memory itself, so the range is handed to a Fast DDS
   profile instead (``fastdds_udp_localhost.xml``: UDPv4 on 127.0.0.1 only, localhost as the
   initial peer, no multicast), and rmw is told ``SYSTEM_DEFAULT`` so that it leaves the
-  transports alone; discovery still stays on this host. With ``SUBNET`` (a lab network):
-  ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4``.
+  transports alone; discovery still stays on this host. With ``SUBNET`` (a lab network): a
+  profile too (``fastdds_udp_subnet.xml``: UDPv4, socket buffers of 4 MB; the file says why),
+  discovery as rmw_fastrtps does it for that range.
 * ``shm``: rmw_fastrtps's defaults (shared memory + UDP).
 
 Nothing is changed when the user configures Fast DDS already (a profiles file,
@@ -31,6 +32,7 @@ from pathlib import Path
 from typing import Mapping, MutableMapping
 
 PROFILE = Path(__file__).resolve().parent / 'fastdds_udp_localhost.xml'
+SUBNET_PROFILE = Path(__file__).resolve().parent / 'fastdds_udp_subnet.xml'
 CHOICES = ('udp', 'shm')
 
 
@@ -63,8 +65,8 @@ def apply_transport(env: MutableMapping[str, str] | None = None) -> str:
         env['RWPEND_DISCOVERY_RANGE'] = 'LOCALHOST'   # what the user asked for (for messages)
         return 'udp on localhost (Fast DDS profile)'
     if rng in ('', 'SUBNET'):
-        env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
-        return 'udp (FASTDDS_BUILTIN_TRANSPORTS=UDPv4)'
+        env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(SUBNET_PROFILE)
+        return 'udp on the subnet (Fast DDS profile)'
     return f'left to rmw_fastrtps (discovery range {rng})'
 
 

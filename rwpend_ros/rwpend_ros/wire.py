@@ -24,11 +24,14 @@ ENCAPSULATION = b'\x00\x01\x00\x00'   # CDR little endian, no options
 _HEAD = struct.Struct('<iII')          # stamp.sec, stamp.nanosec, frame_id length
 _ENC_TAIL = struct.Struct('<Qii')      # seq, pendulum_counts, motor_counts
 _CMD_TAIL = struct.Struct('<Qd')       # seq, u
-_STATE_TAIL = struct.Struct('<Q6dI')   # seq, theta ... energy, estimator length
-_STATE_FIELDS = struct.Struct('<Q6d')  # seq, theta ... energy (the estimator name not decoded)
-_PLANT_TAIL = struct.Struct('<Q8d2?')  # seq, theta ... disturbance, stuck, command_timeout
+_CMD_SENDER = struct.Struct('<Q?')     # controller_id, release (after seq, u)
+_STATE_TAIL = struct.Struct('<Q6d3I')  # seq, theta ... energy, resyncs, missed, estimator length
+_STATE_FIELDS = struct.Struct('<Q6d2I')  # seq, theta ... energy, resyncs, missed (not the name)
+_PLANT_TAIL = struct.Struct('<Qq8d2?')  # seq, command_seq, theta ... disturbance, stuck, command_timeout
+_APPLIED_TAIL = struct.Struct('<Qqd')   # seq, command_seq, u
 _CLOCK = struct.Struct('<iI')          # rosgraph_msgs/Clock: builtin_interfaces/Time
 _U32 = struct.Struct('<I')
+_U32_MAX = 0xFFFF_FFFF
 _2D = struct.Struct('<2d')
 
 
@@ -78,6 +81,17 @@ def _after_header(data: bytes) -> int:
     return 4 + end + _pad8(end)
 
 
+_SEQ = struct.Struct('<Q')
+
+
+def message_seq_stamp(data: bytes) -> tuple[int, int]:
+    """(seq, header.stamp in ns) of a loop message (EncoderCounts, MotorCommand, StateEstimate,
+    PlantState: a Header, then the uint64 seq); struct.error when too short."""
+    sec, nanosec, n = _HEAD.unpack_from(data, 4)
+    end = 12 + n
+    return _SEQ.unpack_from(data, 4 + end + _pad8(end))[0], sec * 1_000_000_000 + nanosec
+
+
 def unpack_encoders(data: bytes) -> tuple[bytes, int, int, int]:
     """rwpend_msgs/EncoderCounts -> (header bytes, seq, pendulum_counts, motor_counts)."""
     end = header_end(data)
@@ -91,20 +105,38 @@ def unpack_command(data: bytes) -> tuple[int, float]:
     return _CMD_TAIL.unpack_from(data, _after_header(data))
 
 
+def unpack_command_sender(data: bytes) -> tuple[int, float, int, bool]:
+    """rwpend_msgs/MotorCommand -> (seq, u, controller_id, release). A command of the layout
+    before ``controller_id`` (a bag recorded earlier, played back) ends after ``u``: it comes
+    from an anonymous sender (id 0, no release)."""
+    at = _after_header(data)
+    seq, u = _CMD_TAIL.unpack_from(data, at)
+    at += _CMD_TAIL.size
+    if len(data) < at + _CMD_SENDER.size:
+        return seq, u, 0, False
+    source, release = _CMD_SENDER.unpack_from(data, at)
+    return seq, u, source, release
+
+
+def command_sender(data: bytes) -> int:
+    """The ``controller_id`` of a MotorCommand's wire bytes (0 for the earlier layout)."""
+    return unpack_command_sender(data)[2]
+
+
 def unpack_state(data: bytes) -> tuple:
     """rwpend_msgs/StateEstimate -> (header bytes, seq, theta, theta_dot, wheel_angle,
-    wheel_rate, friction, energy); the estimator's name is not decoded."""
+    wheel_rate, friction, energy, resyncs, missed); the estimator's name is not decoded."""
     end = header_end(data)
     return (bytes(data[4:end]),) + _STATE_FIELDS.unpack_from(data, end + _pad8(end - 4))
 
 
-def pack_plant_state(header: bytes, seq: int, theta: float, theta_dot: float, wheel_angle: float,
-                     wheel_rate: float, u_commanded: float, u_applied: float, friction: float,
-                     disturbance: float, stuck: bool, command_timeout: bool) -> bytes:
+def pack_plant_state(header: bytes, seq: int, command_seq: int, theta: float, theta_dot: float,
+                     wheel_angle: float, wheel_rate: float, u_commanded: float, u_applied: float,
+                     friction: float, disturbance: float, stuck: bool, command_timeout: bool) -> bytes:
     """rwpend_msgs/PlantState (the simulator's sim/true_state)."""
     return (ENCAPSULATION + header + bytes(_pad8(len(header)))
-            + _PLANT_TAIL.pack(seq, theta, theta_dot, wheel_angle, wheel_rate, u_commanded, u_applied,
-                               friction, disturbance, stuck, command_timeout))
+            + _PLANT_TAIL.pack(seq, command_seq, theta, theta_dot, wheel_angle, wheel_rate, u_commanded,
+                               u_applied, friction, disturbance, stuck, command_timeout))
 
 
 def pack_clock(sec: int, nanosec: int) -> bytes:
@@ -127,8 +159,14 @@ def pack_encoders(header: bytes, seq: int, pendulum_counts: int, motor_counts: i
             + _ENC_TAIL.pack(seq, pendulum_counts, motor_counts))
 
 
-def pack_command(header: bytes, seq: int, u: float) -> bytes:
-    return ENCAPSULATION + header + bytes(_pad8(len(header))) + _CMD_TAIL.pack(seq, u)
+def pack_applied(header: bytes, seq: int, command_seq: int, u: float) -> bytes:
+    """rwpend_msgs/AppliedCommand as CDR bytes."""
+    return ENCAPSULATION + header + bytes(_pad8(len(header))) + _APPLIED_TAIL.pack(seq, command_seq, u)
+
+
+def pack_command(header: bytes, seq: int, u: float, controller_id: int = 0, release: bool = False) -> bytes:
+    return (ENCAPSULATION + header + bytes(_pad8(len(header))) + _CMD_TAIL.pack(seq, u)
+            + _CMD_SENDER.pack(controller_id, release))
 
 
 class StatePacker:
@@ -142,10 +180,13 @@ class StatePacker:
         self._name = estimator.encode() + b'\x00'
 
     def pack(self, header: bytes, seq: int, theta: float, theta_dot: float, wheel_angle: float,
-             wheel_rate: float, friction: float, energy: float) -> bytes:
+             wheel_rate: float, friction: float, energy: float, resyncs: int = 0,
+             missed: int = 0) -> bytes:
+        """uint32 counters: resyncs modulo 2**32, missed saturated at 2**32 - 1."""
         return b''.join((ENCAPSULATION, header, bytes(_pad8(len(header))),
                          _STATE_TAIL.pack(seq, theta, theta_dot, wheel_angle, wheel_rate, friction,
-                                          energy, len(self._name)),
+                                          energy, resyncs & _U32_MAX, min(missed, _U32_MAX),
+                                          len(self._name)),
                          self._name))
 
 

@@ -1,8 +1,7 @@
-"""rwpend_ros.common.sample_time / SampleTime: lockstep nodes take their ROS time from the
+"""rwpend_ros.simtime.sample_time / SampleTime: lockstep nodes take their ROS time from the
 samples' stamps instead of /clock (real rclpy nodes, no other process)."""
 from __future__ import annotations
 
-import random
 
 import pytest
 import rclpy
@@ -10,13 +9,15 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from rwpend_ros import wire
-from rwpend_ros.common import ConfigError, sample_time
+from rwpend_ros.params import ConfigError, ParameterTable
+from rwpend_ros.simtime import sample_time
+from rwpend_ros.testenv import test_domain_id
 
 
 @pytest.fixture
 def make_node():
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.SystemRandom().randint(100, 230))
+    rclpy.init(context=ctx, domain_id=test_domain_id())
     made = []
 
     def make(**params):
@@ -40,7 +41,7 @@ def encoders(sec, nanosec, seq=1):
 
 def test_the_clock_follows_the_stamps_forward_only_and_clock_is_not_subscribed(make_node):
     node = make_node(use_sim_time=True, time_from_samples=True)
-    st = sample_time(node)
+    st = sample_time(node, ParameterTable(node))
     assert st is not None and not clock_subscribed(node)
     assert node.get_clock().now().nanoseconds == 0           # sim time not started
     st(encoders(2, 5_000_000))
@@ -54,9 +55,11 @@ def test_the_clock_follows_the_stamps_forward_only_and_clock_is_not_subscribed(m
 
 def test_off_by_default_and_refused_without_sim_time(make_node):
     plain = make_node(use_sim_time=True)
-    assert sample_time(plain) is None and clock_subscribed(plain)
+    assert sample_time(plain, ParameterTable(plain)) is None and clock_subscribed(plain)
     assert plain.describe_parameter('time_from_samples').read_only
     with pytest.raises(ConfigError, match='needs use_sim_time'):
-        sample_time(make_node(time_from_samples=True))
-    with pytest.raises(ConfigError, match='must be a bool'):
-        sample_time(make_node(time_from_samples='yes'))
+        node = make_node(time_from_samples=True)
+        sample_time(node, ParameterTable(node))
+    with pytest.raises(ConfigError, match='must be true or false'):
+        node = make_node(time_from_samples='yes')
+        sample_time(node, ParameterTable(node))

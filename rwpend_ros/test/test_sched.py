@@ -1,6 +1,7 @@
 """Process scheduling helpers (pure): the PM QoS CPU wake-up latency request."""
 from __future__ import annotations
 
+import os
 import sys
 
 import pytest
@@ -72,3 +73,32 @@ def test_cpu_affinity_reaches_the_threads_started_before(tmp_path):
     assert out.returncode == 0, out.stderr
     cpus, n, pinned = out.stdout.rsplit(' ', 2)
     assert cpus == '[0]' and int(n) >= 3 and pinned.strip() == 'True', out.stdout
+
+
+def test_raise_thread_priority_only_for_real_time_threads():
+    """An ordinary thread stays ordinary; a SCHED_FIFO one (where permitted) goes one above its
+    process, in that thread only."""
+    import threading
+
+    from rwpend_ros.sched import raise_thread_priority
+    out = {}
+    t = threading.Thread(target=lambda: out.setdefault('plain', raise_thread_priority()))
+    t.start()
+    t.join()
+    assert out['plain'] == 'not real-time'
+
+    def fifo():
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+        except OSError:
+            out['fifo'] = 'skip'
+            return
+        out['fifo'] = raise_thread_priority()
+        out['after'] = os.sched_getparam(0).sched_priority
+    t = threading.Thread(target=fifo)
+    t.start()
+    t.join()
+    if out['fifo'] == 'skip':
+        pytest.skip('SCHED_FIFO not permitted here')
+    assert out['fifo'] == 'SCHED_FIFO 11' and out['after'] == 11
+    assert os.sched_getscheduler(0) != os.SCHED_FIFO        # the test's own thread unchanged

@@ -1,13 +1,14 @@
-"""SlackTimer (rwpend_ros.common): periodic work of a loop node runs in the loop's slack."""
+"""SlackTimer (rwpend_ros.nodes): periodic work of a loop node runs in the loop's slack."""
 from __future__ import annotations
 
-from rwpend_ros.common import SlackTimer
-from rwpend_ros.intra import BUS
+from rwpend_ros.intra import LocalBus
+from rwpend_ros.nodes import SlackTimer
 
 
 class FakeNode:
-    def __init__(self):
+    def __init__(self, bus=None):
         self.timers = []
+        self.bus = bus
 
     def create_timer(self, period, callback):
         self.timers.append((period, callback))
@@ -24,7 +25,8 @@ def test_runs_at_the_tick_while_no_sample_comes():
 
 
 def test_while_the_loop_runs_it_waits_for_the_end_of_the_next_sample():
-    node, runs = FakeNode(), []
+    BUS = LocalBus()
+    node, runs = FakeNode(BUS), []
     t = SlackTimer(node, 1.0, lambda: runs.append('diag'))
     tick = node.timers[0][1]
 
@@ -46,3 +48,14 @@ def test_while_the_loop_runs_it_waits_for_the_end_of_the_next_sample():
     assert runs[-1] == 'diag' and t.at_tick == 1 and not t.due
     BUS.call(owner, sample, 3)
     assert runs[-1] == 'sample 3 end'        # nothing due
+
+
+def test_without_a_bus_it_runs_at_the_end_of_the_next_sample():
+    node, runs = FakeNode(), []
+    t = SlackTimer(node, 1.0, lambda: runs.append('diag'))
+    tick = node.timers[0][1]
+    t.sample_done()
+    tick()
+    runs.append('sample')
+    t.sample_done()
+    assert runs == ['sample', 'diag'] and t.in_slack == 1

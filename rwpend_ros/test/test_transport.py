@@ -3,7 +3,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from rwpend_ros.transport import PROFILE, apply_transport, discovery_range, transport_choice
+from rwpend_ros.transport import PROFILE, SUBNET_PROFILE, apply_transport, discovery_range, transport_choice
 
 
 def test_localhost_becomes_udp_profile():
@@ -18,12 +18,25 @@ def test_localhost_becomes_udp_profile():
 
 
 @pytest.mark.parametrize('rng', ['SUBNET', ''])
-def test_subnet_gets_udp_builtin_transport(rng):
+def test_subnet_gets_the_udp_subnet_profile(rng):
     env = {'ROS_AUTOMATIC_DISCOVERY_RANGE': rng} if rng else {}
     apply_transport(env)
-    assert env['FASTDDS_BUILTIN_TRANSPORTS'] == 'UDPv4'
-    assert 'FASTRTPS_DEFAULT_PROFILES_FILE' not in env
+    assert env['FASTRTPS_DEFAULT_PROFILES_FILE'] == str(SUBNET_PROFILE) and SUBNET_PROFILE.is_file()
+    assert 'FASTDDS_BUILTIN_TRANSPORTS' not in env
+    assert env.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '') == rng, 'discovery stays rmw_fastrtps\'s'
     assert discovery_range(env) == (rng or 'SUBNET')
+    before = dict(env)
+    apply_transport(env)                      # a child process applies it again: no change
+    assert env == before
+
+
+def test_subnet_profile_is_udp_with_big_buffers():
+    ns = {'d': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+    root = ET.parse(SUBNET_PROFILE).getroot()
+    assert root.find('.//d:transport_descriptor/d:type', ns).text == 'UDPv4'
+    assert int(root.find('.//d:transport_descriptor/d:receiveBufferSize', ns).text) >= 4 << 20
+    assert root.find('.//d:useBuiltinTransports', ns).text == 'false'
+    assert root.find('.//d:data_writer', ns) is None, "Fast DDS's writer timing (see the file)"
 
 
 @pytest.mark.parametrize('extra', [

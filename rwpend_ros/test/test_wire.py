@@ -37,21 +37,59 @@ def test_command_roundtrip(frame):
     m = header(MotorCommand(), frame)
     m.seq, m.u = 77, -3.25
     assert wire.unpack_command(serialize_message(m)) == (77, -3.25)
+    assert wire.unpack_command_sender(serialize_message(m)) == (77, -3.25, 0, False)
     back = deserialize_message(wire.pack_command(wire.pack_header(12, 345_678_901, frame), 77, -3.25),
                                MotorCommand)
     assert back == m
 
 
+COUNTERS = [(0, 0), (1, 0), (7, 412), (2**32 - 1, 2**32 - 1)]
+
+
+@pytest.mark.parametrize('frame', FRAMES)
+@pytest.mark.parametrize('source, release', [(1, False), (2**64 - 1, True), (0x1234_5678_9abc_def0, False)])
+def test_command_sender_roundtrip(frame, source, release):
+    m = header(MotorCommand(), frame)
+    m.seq, m.u, m.controller_id, m.release = 9, 1.5, source, release
+    data = serialize_message(m)
+    assert wire.unpack_command_sender(data) == (9, 1.5, source, release)
+    assert wire.command_sender(data) == source
+    ours = wire.pack_command(wire.pack_header(12, 345_678_901, frame), 9, 1.5, source, release)
+    assert deserialize_message(ours, MotorCommand) == m
+    assert len(ours) == len(data)
+
+
+def test_command_of_the_earlier_layout_is_anonymous():
+    """A MotorCommand recorded before controller_id existed (header, seq, u) reads as id 0."""
+    old = wire.pack_command(wire.pack_header(1, 2, 'rwpend'), 5, 0.5)[:-9]   # without id, release
+    assert wire.unpack_command_sender(old) == (5, 0.5, 0, False)
+
+
 @pytest.mark.parametrize('frame', FRAMES)
 @pytest.mark.parametrize('name', ['', 'nonlinear', 'observer3'])
-def test_state_pack(frame, name):
+@pytest.mark.parametrize('resyncs, missed', COUNTERS)
+def test_state_pack(frame, name, resyncs, missed):
     p = wire.StatePacker(name)
-    data = p.pack(wire.pack_header(12, 345_678_901, frame), 5, 0.1, -0.2, 3.0, -4.5, 0.01, 1e-3)
+    data = p.pack(wire.pack_header(12, 345_678_901, frame), 5, 0.1, -0.2, 3.0, -4.5, 0.01, 1e-3,
+                  resyncs, missed)
     m = deserialize_message(data, StateEstimate)
     assert m.header.frame_id == frame and m.header.stamp.sec == 12 and m.header.stamp.nanosec == 345_678_901
     assert (m.seq, m.theta, m.theta_dot, m.wheel_angle, m.wheel_rate, m.friction, m.energy) == \
         (5, 0.1, -0.2, 3.0, -4.5, 0.01, 1e-3)
+    assert (m.resyncs, m.missed) == (resyncs, missed)
     assert m.estimator == name
+    ref = header(StateEstimate(), frame)
+    ref.seq, ref.theta, ref.theta_dot, ref.wheel_angle, ref.wheel_rate, ref.friction, ref.energy = \
+        5, 0.1, -0.2, 3.0, -4.5, 0.01, 1e-3
+    ref.resyncs, ref.missed, ref.estimator = resyncs, missed, name
+    assert len(data) == len(serialize_message(ref))
+
+
+def test_state_pack_counters_stay_uint32():
+    """resyncs wraps (a controller compares it for a change), missed saturates."""
+    data = wire.StatePacker('x').pack(wire.pack_header(0, 0, ''), 1, 0, 0, 0, 0, 0, 0, 2**32 + 3, 2**40)
+    m = deserialize_message(data, StateEstimate)
+    assert (m.resyncs, m.missed) == (3, 2**32 - 1)
 
 
 @pytest.mark.parametrize('frame', FRAMES)
@@ -66,27 +104,40 @@ def test_joint_state_pack(frame, names):
 
 @pytest.mark.parametrize('frame', FRAMES)
 @pytest.mark.parametrize('name', ['', 'observer2'])
-def test_state_unpack(frame, name):
+@pytest.mark.parametrize('resyncs, missed', COUNTERS)
+def test_state_unpack(frame, name, resyncs, missed):
     m = header(StateEstimate(), frame)
     m.seq, m.theta, m.theta_dot, m.wheel_angle, m.wheel_rate, m.friction, m.energy = \
         2**33 + 1, 3.1, -0.5, 12.0, -300.25, 0.125, -1e-9
+    m.resyncs, m.missed = resyncs, missed
     m.estimator = name
     h, *rest = wire.unpack_state(serialize_message(m))
-    assert tuple(rest) == (m.seq, m.theta, m.theta_dot, m.wheel_angle, m.wheel_rate, m.friction, m.energy)
+    assert tuple(rest) == (m.seq, m.theta, m.theta_dot, m.wheel_angle, m.wheel_rate, m.friction, m.energy,
+                           resyncs, missed)
     assert h == wire.pack_header(12, 345_678_901, frame)
 
 
 @pytest.mark.parametrize('frame', FRAMES)
 @pytest.mark.parametrize('flags', [(False, False), (True, False), (False, True), (True, True)])
 def test_plant_state_pack(frame, flags):
-    data = wire.pack_plant_state(wire.pack_header(12, 345_678_901, frame), 9, 0.1, 0.2, 0.3, 0.4,
+    data = wire.pack_plant_state(wire.pack_header(12, 345_678_901, frame), 9, -1, 0.1, 0.2, 0.3, 0.4,
                                  -10.0, -9.5, 0.7, 1.5, *flags)
     m = deserialize_message(data, PlantState)
     ref = header(PlantState(), frame)
-    ref.seq, ref.theta, ref.theta_dot, ref.wheel_angle, ref.wheel_rate = 9, 0.1, 0.2, 0.3, 0.4
+    ref.seq, ref.command_seq, ref.theta, ref.theta_dot, ref.wheel_angle, ref.wheel_rate = 9, -1, 0.1, 0.2, 0.3, 0.4
     ref.u_commanded, ref.u_applied, ref.friction, ref.disturbance = -10.0, -9.5, 0.7, 1.5
     ref.stuck, ref.command_timeout = flags
     assert m == ref    # (not byte-equal: rclpy leaves its padding bytes uninitialised)
+
+
+@pytest.mark.parametrize('frame', FRAMES)
+def test_applied_command_pack(frame):
+    from rwpend_msgs.msg import AppliedCommand
+    data = wire.pack_applied(wire.pack_header(12, 345_678_901, frame), 2**40 + 3, -1, -9.999)
+    m = deserialize_message(data, AppliedCommand)
+    ref = header(AppliedCommand(), frame)
+    ref.seq, ref.command_seq, ref.u = 2**40 + 3, -1, -9.999
+    assert m == ref
 
 
 def test_clock_pack():

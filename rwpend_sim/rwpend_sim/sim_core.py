@@ -24,6 +24,7 @@ class SimCounters:
     commands: int = 0            # accepted commands
     rejected_commands: int = 0   # non-finite u, or answering a future sample
     stale_commands: int = 0      # answering an older sample than the last accepted one
+    old_commands: int = 0        # answering a sample command_timeout_samples or more old
     saturated_commands: int = 0  # |u| > u_max (applied saturated)
     timeout_samples: int = 0     # samples integrated with u = 0 because of the command timeout
     timeouts: int = 0            # timeout episodes
@@ -39,6 +40,10 @@ class SimCore:
     Per sample k: :meth:`sample` returns the encoder counts at t_k (published with seq k);
     then :meth:`advance` integrates to t_{k+1} with the command held (the latest accepted one,
     or 0 after ``command_timeout_samples`` samples without a fresh command, or under e-stop).
+    A command is accepted, and held, only while the sample it answers is less than
+    ``command_timeout_samples`` old: a controller that acts on old states (catching up after a
+    pause) never moves the motor, and the motor is at zero within that many samples of the
+    sample the last command answered (``held_seq``).
     """
 
     def __init__(self, rig: Rig, *, command_timeout_samples: int = 3, **plant_kwargs) -> None:
@@ -51,10 +56,14 @@ class SimCore:
         self.u = 0.0                     # latest accepted command (before saturation)
         self.u_seq = -1                  # seq that the latest accepted command answered
         self.last_command_k = None       # sample index when the latest command was accepted
+        self._zero_next = False          # the next sample is held at zero (lockstep: no command)
         self.timed_out = False
         self.estop = False
+        #: seq the command held over the last interval answers (-1: u = 0 by timeout / e-stop)
+        self.held_seq = -1
         self._torque_until = -1.0
         self._taps: list[tuple[float, float]] = []
+        self._torques: list[tuple[float, float, float]] = []
         self.counters = SimCounters()
 
     def schedule_taps(self, times, sizes) -> None:
@@ -69,6 +78,22 @@ class SimCore:
             if not (isinstance(dv, (int, float)) and math.isfinite(dv) and abs(dv) <= MAX_TAP):
                 raise ValueError(f'tap size must be finite and |size| <= {MAX_TAP} rad/s, got {dv!r}')
         self._taps = sorted((float(t), float(dv)) for t, dv in zip(times, sizes))
+
+    def schedule_torques(self, times, sizes, durations) -> None:
+        """Torques on the pendulum at given simulated times (s): ``size`` control units for
+        ``duration`` s from the first sample at or after each time (a rubber band, Experiment 15)
+        -- scripted like the taps, so a lockstep run with them is reproducible."""
+        times, sizes, durations = list(times), list(sizes), list(durations)
+        if not len(times) == len(sizes) == len(durations):
+            raise ValueError(f'torques: {len(times)} times, {len(sizes)} sizes, {len(durations)} durations')
+        for t, d, dur in zip(times, sizes, durations):
+            if not (isinstance(t, (int, float)) and math.isfinite(t) and t >= 0):
+                raise ValueError(f'torque time must be finite and >= 0, got {t!r}')
+            if not (isinstance(d, (int, float)) and math.isfinite(d) and abs(d) <= MAX_DISTURBANCE):
+                raise ValueError(f'torque size must be finite and |size| <= {MAX_DISTURBANCE} units, got {d!r}')
+            if not (isinstance(dur, (int, float)) and math.isfinite(dur) and 0 < dur <= MAX_DURATION):
+                raise ValueError(f'torque duration must be in (0, {MAX_DURATION}] s, got {dur!r}')
+        self._torques = sorted((float(t), float(d), float(dur)) for t, d, dur in zip(times, sizes, durations))
 
     # ------------------------------------------------------------- inputs
     def command(self, seq: int, u: float) -> tuple[bool, str]:
@@ -85,6 +110,12 @@ class SimCore:
         if seq <= self.u_seq:
             c.stale_commands += 1
             return False, f'stale command for seq {seq} (already have {self.u_seq})'
+        if self.k - seq >= self.timeout_samples:
+            # computed from a state that is too old to act on (a controller catching up after a
+            # pause): never applied, so the motor is at zero within the timeout whatever comes
+            c.old_commands += 1
+            return False, (f'old command for seq {seq}: {self.k - seq} samples old at sample '
+                           f'{self.k} (>= command_timeout_samples {self.timeout_samples})')
         if abs(u) > self.rig.u_max:
             c.saturated_commands += 1
         self.u = float(u)
@@ -116,10 +147,14 @@ class SimCore:
 
     def held_command(self) -> float:
         """The command the amplifier holds over [t_k, t_k+1): 0 on timeout or e-stop."""
+        self.held_seq = -1
         if self.estop:
             self.counters.estop_samples += 1
             return 0.0
-        fresh = self.last_command_k is not None and self.k - self.last_command_k < self.timeout_samples
+        # fresh while the sample the command answers is less than timeout_samples old: a command
+        # computed from sample j drives the motor over [t_j, t_j+N) at most
+        fresh = self.u_seq >= 0 and self.k - self.u_seq < self.timeout_samples and not self._zero_next
+        self._zero_next = False
         if not fresh:
             if not self.timed_out:
                 self.counters.timeouts += 1
@@ -127,13 +162,22 @@ class SimCore:
             self.counters.timeout_samples += 1
             return 0.0
         self.timed_out = False
+        self.held_seq = self.u_seq
         return self.u
+
+    def no_command(self) -> None:
+        """The command of the current sample will not come (lockstep gave up waiting for it): the
+        next :meth:`advance` holds u = 0, whatever was held before."""
+        self._zero_next = True
 
     def advance(self) -> float:
         """Integrate [t_k, t_k+1) and move to sample k+1; returns the command held."""
         u = self.held_command()
         while self._taps and self._taps[0][0] <= self.plant.t + 1e-9:
             self.plant.tap(self._taps.pop(0)[1])
+        while self._torques and self._torques[0][0] <= self.plant.t + 1e-9:
+            _, d, dur = self._torques.pop(0)
+            self.torque(d, dur)
         if self._torque_until >= 0.0 and self.plant.t >= self._torque_until - 1e-12:
             self.plant.disturbance = 0.0
             self._torque_until = -1.0

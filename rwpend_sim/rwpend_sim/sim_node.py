@@ -3,7 +3,8 @@
 Publishes ``encoders`` (EncoderCounts) every h, applies the latest ``command`` (MotorCommand)
 with zero-order hold, publishes ``sim/true_state`` (PlantState), serves ``sim/disturb``
 (Disturb), enforces the command timeout and the latched e-stop (``estop`` topic,
-std_msgs/Bool, and ``~/estop`` service, std_srvs/SetBool), reports on ``/diagnostics``.
+std_msgs/Bool, and ``~/estop`` service, std_srvs/SetBool), reports on ``/diagnostics``
+(stamped with the sim time in lockstep, like the estimator's and the controller's).
 
 Two time modes (parameter ``lockstep``):
 * real time: samples on the wall clock, like the rig (a thread with absolute deadlines);
@@ -12,7 +13,7 @@ Two time modes (parameter ``lockstep``):
   integrating; runs as fast as the loop allows; identical inputs give identical outputs.
   With ``lockstep_recorder_window`` W > 0 it also keeps within W samples of the recorder: sample
   k goes out once the recorder has reported (``recorder/progress``, rosgraph_msgs/Clock, every
-  :data:`rwpend_ros.common.RECORDER_PROGRESS_EVERY` samples) the ``/clock`` of sample k - W, so a
+  :data:`rwpend_ros.RECORDER_PROGRESS_EVERY` samples) the ``/clock`` of sample k - W, so a
   recorder that runs behind (starved of CPU, a slow disk) slows the run down instead of losing
   messages (the publishers keep 100 samples for a reader that lags: QOS_CONTROL_PUB).
 
@@ -21,8 +22,10 @@ All algorithms live in :mod:`rwpend_sim.sim_core` and :mod:`rwpend_model.plant`.
 from __future__ import annotations
 
 import struct
+import sys
 import threading
 import time
+from functools import partial
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rosgraph_msgs.msg import Clock
@@ -32,105 +35,143 @@ from std_srvs.srv import SetBool
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState
 from rwpend_msgs.srv import Disturb
 from rwpend_ros import wire
-from rwpend_ros.hostbus import CALLBACK_LOCK
-from rwpend_ros.intra import BUS
+from rwpend_ros.claim import CommandClaim, format_id
+from rwpend_ros.diagnostics import publish_diagnostic
+from rwpend_ros.health import EXIT_LOOP_DEAD, SLOW_ADVICE, LoopHealth
+from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, local_subscription
+from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
+from rwpend_ros.paramspec import ParamSpec
+from rwpend_ros.qos import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS, RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN)
+from rwpend_ros.runner import run_node
+from rwpend_model.rig import format_differences, rig_differences
 from rwpend_ros.trace import tracer
-from rwpend_ros.common import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS,
-                               RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN, ConfigError, LocalPublisher,
-                               RwNode, SlackTimer, declare_read_only, declare_rig, fast_path_values,
-                               local_subscription, publish_diagnostic, run_node)
-from rwpend_sim.sim_core import SimCore
+from rwpend_sim.sim_core import MAX_TAP, SimCore
 
-PARAMS = {
-    'lockstep': (False, 'lockstep time mode: publish /clock, wait for the command of each sample'),
-    'lockstep_timeout': (0.5, 'lockstep: wall seconds to wait for the command of a sample'),
-    'lockstep_recorder_window': (0, 'lockstep: samples the simulator may run ahead of the recorder '
-                                 '(recorder/progress); 0 = no recorder to wait for (./rwpend up '
-                                 '--lockstep --record sets 50); else 20..80'),
-    'lockstep_recorder_timeout': (5.0, 'lockstep: wall seconds without progress from a recorder that is '
-                                  'behind before the simulator runs on without it (warned, counted in '
-                                  '/diagnostics: the bag may then miss messages)'),
-    'start.delay': (0.5, 'wall seconds to wait after the loop is connected, before sample 0'),
-    'start.encoders_subscribers': (1, 'subscribers of encoders to wait for before sample 0 (2 with a recorder)'),
-    'start.true_state_subscribers': (0, 'subscribers of sim/true_state to wait for before sample 0'),
-    'start.state_subscribers': (0, 'lockstep: subscribers of state (the controller) to wait for before sample 0'),
-    'start.first_command_timeout': (10.0, 'lockstep: wall seconds sample 0 waits for its command '
-                                    '(start-up under load; later samples wait lockstep_timeout)'),
-    'wake_early_us': (0, 'real time: wake this many us before each sample instant and wait the rest '
-                      'actively (yielding the CPU): a sample goes out closer to its instant, at the '
-                      'cost of CPU (0 = sleep until the instant)'),
-    'command_timeout_samples': (3, 'samples without a fresh command before u = 0'),
-    'initial.theta': (0.0, 'initial pendulum angle (rad, 0 hanging, pi upright)'),
-    'initial.theta_dot': (0.0, 'initial pendulum angular velocity (rad/s)'),
-    'initial.wheel_angle': (0.0, 'initial absolute wheel angle (rad)'),
-    'initial.wheel_rate': (0.0, 'initial absolute wheel angular velocity (rad/s)'),
-    'friction': (True, 'rotor friction (3.17) with stiction and pendulum-axis friction'),
-    'motor_lag': (True, 'first-order current lag T_e'),
-    'pwm': (True, 'PWM duty quantization of the command'),
-    'back_emf': (True, 'back-EMF cut-off (2.13)'),
-    'publish_true_state': (True, 'publish sim/true_state every sample'),
-    'taps.times': ([-1.0], 'scripted taps: simulated times (s); [-1.0] = none'),
-    'taps.sizes': ([0.0], 'scripted taps: theta_dot jumps (rad/s), one per time'),
-    'duration': (0.0, 'stop after this many simulated seconds (0 = run until stopped)'),
-    'frame_id': ('rwpend', 'frame_id of the published headers'),
-    'diagnostics_period': (1.0, 'seconds between /diagnostics messages'),
-}
+RO = partial(ParamSpec, read_only=True)
+
+#: The simulator's parameters, all read-only (set at start): name, default, description, bounds.
+PARAMS = [
+    RO('lockstep', False, 'lockstep time mode: publish /clock, wait for the command of each sample'),
+    RO('lockstep_timeout', 0.5, 'lockstep: wall seconds to wait for the command of a sample',
+       low=0.0, low_open=True),
+    RO('lockstep_recorder_window', 0, 'lockstep: samples the simulator may run ahead of the recorder '
+       '(recorder/progress); 0 = no recorder to wait for (./rwpend up --lockstep --record sets 50)',
+       low=0, high=RECORDER_WINDOW_MAX, constraints=f'0 or {RECORDER_WINDOW_MIN}..{RECORDER_WINDOW_MAX}'),
+    RO('lockstep_recorder_timeout', 5.0, 'lockstep: wall seconds without progress from a recorder that '
+       'is behind before the simulator runs on without it (warned, counted in /diagnostics: the '
+       'bag may then miss messages)', low=0.0, low_open=True),
+    RO('start.delay', 0.5, 'wall seconds to wait after the loop is connected, before sample 0', low=0.0),
+    RO('start.encoders_subscribers', 1, 'subscribers of encoders to wait for before sample 0 '
+       '(2 with a recorder)', low=0),
+    RO('start.true_state_subscribers', 0, 'subscribers of sim/true_state to wait for before sample 0',
+       low=0),
+    RO('start.state_subscribers', 0, 'lockstep: subscribers of state (the controller) to wait for '
+       'before sample 0', low=0),
+    RO('start.first_command_timeout', 10.0, 'lockstep: wall seconds sample 0 waits for its command '
+       '(start-up under load; later samples wait lockstep_timeout)', low=0.0, low_open=True),
+    RO('wake_early_us', 0, 'real time: wake this many us before each sample instant and wait the rest '
+       'actively (yielding the CPU): a sample goes out closer to its instant, at the cost of CPU '
+       '(0 = sleep until the instant)', low=0, high=1_000_000),
+    RO('command_timeout_samples', 3, 'samples without a fresh command before u = 0', low=1),
+    RO('claim_timeout_samples', 500, 'samples without any command of the controller that claimed the '
+       'rig before another controller may claim it (rwpend_ros.claim)', low=1),
+    RO('initial.theta', 0.0, 'initial pendulum angle (rad, 0 hanging, pi upright)'),
+    RO('initial.theta_dot', 0.0, 'initial pendulum angular velocity (rad/s)'),
+    RO('initial.wheel_angle', 0.0, 'initial absolute wheel angle (rad)'),
+    RO('initial.wheel_rate', 0.0, 'initial absolute wheel angular velocity (rad/s)'),
+    RO('friction', True, 'rotor friction (3.17) with stiction and pendulum-axis friction'),
+    RO('motor_lag', True, 'first-order current lag T_e'),
+    RO('pwm', True, 'PWM duty quantization of the command'),
+    RO('back_emf', True, 'back-EMF cut-off (2.13)'),
+    RO('bracket', False, 'Chapter 3 configuration (Fig. 3.1): pendulum locked on the fixed bracket, '
+       'wheel free'),
+    RO('torque_meter', False, 'with bracket: the wheel held by a torque meter (Experiment 2); it reads '
+       'k_u (torque - friction) of sim/true_state'),
+    RO('publish_true_state', True, 'publish sim/true_state every sample'),
+    RO('taps.times', [-1.0], 'scripted taps: simulated times (s); [-1.0] = none',
+       constraints='each >= 0, or [-1.0]'),
+    RO('taps.sizes', [0.0], 'scripted taps: theta_dot jumps (rad/s), one per time',
+       constraints=f'as many as taps.times, each |size| <= {MAX_TAP:g}'),
+    RO('torques.times', [-1.0], 'scripted torques on the pendulum: simulated start times (s); '
+       '[-1.0] = none', constraints='each >= 0, or [-1.0]'),
+    RO('torques.sizes', [0.0], 'scripted torques: control units, one per time',
+       constraints='as many as torques.times'),
+    RO('torques.durations', [0.0], 'scripted torques: seconds, one per time',
+       constraints='as many as torques.times, each >= 0'),
+    RO('duration', 0.0, 'stop after this many simulated seconds (0 = run until stopped)', low=0.0),
+    RO('frame_id', 'rwpend', 'frame_id of the published headers'),
+    RO('diagnostics_period', 1.0, 'seconds between /diagnostics messages', low=0.0, low_open=True),
+    RO('loop_dead_after', 2.0, 's of command timeout, after the loop had run, before the loop is '
+       'reported dead (an ERROR on /diagnostics; exit status 3 if still dead at the end)',
+       low=0.0, low_open=True),
+]
 
 
 class SimNode(RwNode):
-    def __init__(self) -> None:
-        super().__init__('sim')
-        self.rig = declare_rig(self)
-        p = declare_read_only(self, PARAMS)
-        if (p['lockstep_timeout'] <= 0 or p['diagnostics_period'] <= 0 or p['duration'] < 0
-                or p['start.first_command_timeout'] <= 0):
-            raise ConfigError('lockstep_timeout, start.first_command_timeout and diagnostics_period '
-                              'must be > 0, duration >= 0')
+    def __init__(self, bus=None) -> None:
+        """``bus``: the in-process bus of a composed process (rwpend_ros.intra), else None."""
+        super().__init__('sim', bus=bus)
+        self.param_table = ParameterTable(self)
+        self.rig = declare_rig(self.param_table)   # the plant's physical truth
+        model = declare_rig(self.param_table, 'model_rig.', ': the rig YAML the estimator and controller '
+                            'read (./rwpend up --rig), for the report of where the truth (rig.*) differs')
+        #: where the truth differs from the model, for the start-up line and /diagnostics ('' = nowhere)
+        self.truth_differs = format_differences(rig_differences(model, self.rig))
+        p = self.param_table.declare(PARAMS)
         window = p['lockstep_recorder_window']
         if not (window == 0 or RECORDER_WINDOW_MIN <= window <= RECORDER_WINDOW_MAX):
             raise ConfigError(f'lockstep_recorder_window must be 0 or in {RECORDER_WINDOW_MIN}..'
                               f'{RECORDER_WINDOW_MAX} (samples), got {window}')
-        if not p['lockstep_recorder_timeout'] > 0:
-            raise ConfigError(f"lockstep_recorder_timeout must be > 0 (s), got {p['lockstep_recorder_timeout']}")
-        if not 0 <= p['wake_early_us'] <= 1_000_000:
-            raise ConfigError(f"wake_early_us must be in 0..1000000 (us), got {p['wake_early_us']}")
         try:
             self.core = SimCore(self.rig, command_timeout_samples=p['command_timeout_samples'],
                                 theta=p['initial.theta'], theta_dot=p['initial.theta_dot'],
                                 wheel_angle=p['initial.wheel_angle'], wheel_rate=p['initial.wheel_rate'],
                                 friction=p['friction'], motor_lag=p['motor_lag'], pwm=p['pwm'],
-                                back_emf=p['back_emf'])
+                                back_emf=p['back_emf'], bracket=p['bracket'],
+                                rotor_locked=p['torque_meter'])
             times, sizes = list(p['taps.times']), list(p['taps.sizes'])
             if times == [-1.0]:
                 times, sizes = [], []
             self.core.schedule_taps(times, sizes)
+            times, sizes, durs = (list(p[f'torques.{k}']) for k in ('times', 'sizes', 'durations'))
+            if times == [-1.0]:
+                times, sizes, durs = [], [], []
+            self.core.schedule_torques(times, sizes, durs)
         except (ValueError, TypeError) as exc:
             raise ConfigError(str(exc)) from exc
         self.p = p
         self.h = self.rig.sample_period
+        self.period_ns = int(round(self.h * 1e9))
         self.lockstep = bool(p['lockstep'])
+        # in lockstep a sample without its command costs lockstep_timeout of wall time: the
+        # verdicts count such samples (the first-seconds check only judges real time)
+        self.health = LoopHealth(p['lockstep_timeout'] if self.lockstep else self.h,
+                                 dead_after_s=p['loop_dead_after'])
         self.lock = threading.Condition()
         self.stop = threading.Event()
         self.finished = False
 
-        # first to an estimator in another process of this host (rwpend_ros.hostbus), then to
-        # one in this process (real time: from the sample loop's thread, rwpend_ros.intra), then
-        # DDS. In lockstep an estimator of this process takes it by DDS: the sample goes out from
-        # on_command, inside the chain of callbacks the previous sample started, and through the
-        # bus every sample would be deferred from the one before (the run in one callback)
+        # to an estimator in this process first (real time: from the sample loop's thread,
+        # rwpend_ros.intra), then DDS. In lockstep an estimator of this process takes it by DDS:
+        # the sample goes out from on_command, inside the chain of callbacks the previous sample
+        # started, and through the bus every sample would be deferred from the one before (the
+        # run in one callback)
         self.pub_enc = LocalPublisher(self, EncoderCounts, 'encoders', QOS_CONTROL_PUB,
                                       intra=not self.lockstep)
-        # true_state and /clock go to the recorder (and any other reader): LocalPublisher, so a
-        # recorder on this host takes them through the fast path (no DDS write when it is the
-        # only reader)
-        self.pub_true = LocalPublisher(self, PlantState, 'sim/true_state', QOS_CONTROL_PUB)
+        self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        self.pub_clock = LocalPublisher(self, Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
+        self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
         # also taken directly from a controller in this process (composed mode, rwpend_ros.intra),
         # after the command is written to DDS: an estimator of this process then has command k
         # (through DDS) before the sample k+1 this callback publishes in lockstep
-        local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL, before_dds=False)
+        self.sub_cmd = local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL,
+                                          before_dds=False, sender=wire.command_sender)
+        #: one controller at a time (rwpend_ros.claim)
+        try:
+            self.claim = CommandClaim(p['claim_timeout_samples'])
+        except ValueError as exc:
+            raise ConfigError(f'claim_timeout_samples {exc}') from exc
         self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
@@ -164,7 +205,9 @@ class SimNode(RwNode):
         self.thread.start()
         mode = 'lockstep' if self.lockstep else 'real time'
         self.get_logger().info(f'simulated rig: h = {self.h * 1e3:g} ms, {mode}, '
-                               f'a = {self.rig.a:.3f}, b_p = {self.rig.b_p:.4f}, b_r = {self.rig.b_r:.2f}')
+                               f'a = {self.rig.a:.3f}, b_p = {self.rig.b_p:.4f}, b_r = {self.rig.b_r:.2f}; '
+                               + (f'its truth differs from the rig YAML of the estimator and controller: '
+                                  f'{self.truth_differs}' if self.truth_differs else 'truth = the rig YAML'))
 
     # ------------------------------------------------------------ callbacks
     def on_command(self, data: bytes) -> None:
@@ -173,7 +216,7 @@ class SimNode(RwNode):
         its instant; in lockstep the next sample goes out from here, without waking another
         thread (the loop thread only watches the lockstep timeout)."""
         try:
-            seq, u = wire.unpack_command(data)
+            seq, u, source, release = wire.unpack_command_sender(data)
         except (struct.error, IndexError) as exc:   # truncated bytes: counted, nothing else changes
             with self.lock:
                 self.malformed_commands += 1
@@ -183,16 +226,44 @@ class SimNode(RwNode):
         if self.trace is not None:
             self.trace('sim.rx', seq)
         with self.lock:
-            ok, _ = self.core.command(seq, u)
+            ok = self._offer(source, seq, u, release)
+            if ok:
+                self._report(self.health.command())
             if ok and self.awaiting is not None and self.core.u_seq >= self.awaiting:
                 self._step()
         self.diag_timer.sample_done()
+
+    def _offer(self, source: int, seq: int, u: float, release: bool) -> bool:
+        """Lock held: the command (seq, u) of controller ``source`` to the plant, if that
+        controller may drive the rig (rwpend_ros.claim); True when taken. A release puts the
+        motor at zero now. A change of the claim is said at once (log, /diagnostics)."""
+        taken = self.claim.admit(source, self.core.k, lambda: self.core.command(seq, u)[0], release)
+        event = self.claim.event
+        if event == 'refused':
+            self.get_logger().warn(
+                f'command from controller {format_id(source)} refused: the rig is claimed by '
+                f'{format_id(self.claim.holder)} (publishers of command: {self._command_publishers()})')
+        elif event is not None:
+            self.get_logger().info(f'rig {event} by controller {format_id(source)}')
+        if event == 'released':
+            self.core.no_command()
+        if event is not None:
+            self.publish_diagnostics()
+        return taken
+
+    def _command_publishers(self) -> str:
+        """The nodes publishing ``command`` in the graph, for the report of an intruder."""
+        try:
+            infos = self.get_publishers_info_by_topic(self.sub_cmd.topic_name)
+        except Exception as exc:  # noqa: BLE001 - a report, never a failure
+            return f'unknown ({exc})'
+        return ', '.join(sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos)) or 'none'
 
     def on_recorder_progress(self, data: bytes) -> None:
         """The recorder's progress (the newest ``/clock`` it took, wire bytes): a sample held
         for it goes out once it is within ``lockstep_recorder_window`` samples."""
         try:
-            k = wire.unpack_clock_ns(data) // int(round(self.h * 1e9))
+            k = wire.unpack_clock_ns(data) // self.period_ns
         except (struct.error, IndexError, ValueError):
             with self.lock:
                 self.malformed_progress += 1
@@ -271,7 +342,8 @@ class SimNode(RwNode):
             plant = self.core.plant
             s = plant.state
             self.pub_true.publish(wire.pack_plant_state(
-                header, seq, s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate, plant.u_held, s.torque,
+                header, seq, self.core.held_seq, s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate,
+                plant.u_held, s.torque,
                 s.friction, plant.disturbance, bool(s.stuck), bool(self.core.timed_out)))
         self.awaiting = seq
 
@@ -318,20 +390,21 @@ class SimNode(RwNode):
         ``on_command`` (deferred until the sample is out) all run here, with no hand-over to the
         executor's thread (PERFORMANCE.md, 18.)."""
         self.wait_for_loop(need_command=False)
-        period_ns = int(round(self.h * 1e9))
+        period_ns = self.period_ns
         t0_ros = self.get_clock().now().nanoseconds
         t0 = time.monotonic_ns()
         k = 0
         early = int(self.p['wake_early_us']) * 1000
         me = threading.get_ident()
-        BUS.extra_threads.add(me)
+        bus = self.bus
+        if bus is not None:
+            bus.extra_threads.add(me)
         try:
             while not self.stop.is_set():
                 stamp = t0_ros + k * period_ns
                 tick = t0 + k * period_ns
                 if self.pub_enc.local_subscribers():   # an estimator of this process: as its callback
-                    with CALLBACK_LOCK:
-                        more = BUS.call(self, self._tick, stamp, tick)
+                    more = bus.call(self, self._tick, stamp, tick)
                 else:
                     more = self._tick(stamp, tick)
                 if not more:
@@ -346,7 +419,8 @@ class SimNode(RwNode):
                 while early and time.monotonic_ns() < deadline:
                     time.sleep(0)                      # yields the GIL (the executor thread runs)
         finally:
-            BUS.extra_threads.discard(me)
+            if bus is not None:
+                bus.extra_threads.discard(me)
         self.finish()
 
     def _tick(self, stamp_ns: int, tick_ns: int) -> bool:
@@ -355,7 +429,7 @@ class SimNode(RwNode):
         with self.lock:
             if self.awaiting is not None:      # command k-1 not in time: the held one
                 self.awaiting = None
-                self._advance()
+                self._advance(late=True)
             if self.done():
                 return False
             if self.trace is not None:
@@ -363,10 +437,11 @@ class SimNode(RwNode):
             self.publish_sample(stamp_ns)
         return True
 
-    def _step(self) -> None:
-        """Lock held, command for the awaited sample in: integrate; lockstep: the next sample."""
+    def _step(self, late: bool = False) -> None:
+        """Lock held, command for the awaited sample in (or, ``late``, given up on): integrate;
+        lockstep: the next sample."""
         self.awaiting = None
-        self._advance()
+        self._advance(late)
         self.steps += 1
         if self.lockstep:
             if self.done() or self.stop.is_set():
@@ -379,7 +454,7 @@ class SimNode(RwNode):
                 self._publish_lockstep()
 
     def _publish_lockstep(self) -> None:
-        stamp = self.core.k * int(round(self.h * 1e9))
+        stamp = self.core.k * self.period_ns
         self.step_wall = time.monotonic()
         if self.trace is not None:
             self.trace('sim.tick', self.core.k)
@@ -423,46 +498,89 @@ class SimNode(RwNode):
                     self.get_logger().warn('lockstep: no command for sample 0 within '
                                            f"{self.p['start.first_command_timeout']:g} s; running with u = 0")
                 self.core.counters.late_commands += 1
-                self.core.last_command_k = None   # no command for this sample: u = 0
-                self._step()
+                self.core.no_command()            # no command for this sample: u = 0
+                self._step(late=True)
         self.finish()
 
-    def _advance(self) -> None:
-        """One sample of the plant; /diagnostics at once when the command timeout starts, so the
-        reason for u = 0 is reported when it happens (not up to a diagnostics period later)."""
+    def _advance(self, late: bool = False) -> None:
+        """One sample of the plant (``late``: its command did not come in time); /diagnostics at
+        once when the command timeout starts, so the reason for u = 0 is reported when it
+        happens (not up to a diagnostics period later), and when the loop's health changes."""
         was = self.core.timed_out
         self.core.advance()
-        if self.core.timed_out and not was:
+        event = self.health.sample(late, self.core.timed_out)
+        if event is not None:
+            self._report(event)
+        elif self.core.timed_out and not was:
             self.publish_diagnostics()
+
+    def _report(self, event: str | None) -> None:
+        """The loop's health changed (rwpend_ros.health): said at once, in the log and on
+        /diagnostics."""
+        if event is None:
+            return
+        log = self.get_logger()
+        if event == 'dead':
+            log.error(self.health.dead_reason())
+        elif event == 'alive':
+            log.info('the loop is answering again: commands are fresh')
+        elif event == 'slow' and not self.lockstep:
+            log.warn(f'{self.health.verdict}: this machine does not keep h = {self.h * 1e3:g} ms with '
+                     f'this layout; {SLOW_ADVICE}')
+        self.publish_diagnostics()
+
+    def exit_status(self) -> int:
+        """:data:`rwpend_ros.health.EXIT_LOOP_DEAD` when the loop was dead at the end."""
+        if self.health.dead:
+            print(f'sim: {self.health.dead_reason()} (at the end of the run)', file=sys.stderr, flush=True)
+            return EXIT_LOOP_DEAD
+        return 0
 
     def finish(self) -> None:
         if self.done() and not self.finished:
             self.finished = True
             self.get_logger().info(f'duration reached: {self.core.plant.t:.3f} s simulated in '
                                    f'{time.monotonic() - self.wall_start:.2f} s wall')
-            self.publish_diagnostics()
-            self.context.try_shutdown()   # the process exits cleanly (the launcher's --duration)
+            self.publish_diagnostics()   # finished: the runner ends the process (rwpend_ros.runner)
+
+    def diagnostics_stamp_ns(self) -> int:
+        """The stamp of /diagnostics: lockstep, the sim time of the plant (t_k of the sample
+        the plant is at, the stamp of sample k and of the /clock that goes with it), so every
+        node of a lockstep run stamps /diagnostics on the one simulated clock (the estimator
+        and the controller take their ROS time from the samples); real time, the ROS clock
+        (wall time)."""
+        if self.lockstep:
+            return self.core.k * self.period_ns
+        return self.get_clock().now().nanoseconds
 
     def publish_diagnostics(self) -> None:
         c = self.core.counters
         if self.core.estop:
             level, msg = DiagnosticStatus.ERROR, 'e-stop latched: motor at zero'
+        elif self.health.dead:
+            level, msg = DiagnosticStatus.ERROR, self.health.dead_reason()
         elif self.core.timed_out:
             level, msg = DiagnosticStatus.WARN, (f'command timeout: no command for '
                                                  f'{self.core.timeout_samples} samples, u = 0')
+        elif self.claim.intruding(self.core.k, int(round(1.0 / self.h))):
+            level, msg = DiagnosticStatus.WARN, (
+                f'commands of controller {format_id(self.claim.intruder)} refused: the rig is claimed by '
+                f'{format_id(self.claim.holder)}')
         elif c.rejected_commands:
             level, msg = DiagnosticStatus.WARN, f'rejected commands: {c.last_reject_reason}'
         elif self.recorder_given_up:
             level, msg = DiagnosticStatus.WARN, ('lockstep ran on without the recorder (no progress '
                                                  'from it): the bag may miss messages')
         else:
-            level, msg = DiagnosticStatus.OK, 'running'
+            level, msg = DiagnosticStatus.OK, 'running' + (' (plant truth differs from the rig YAML: '
+                                                         'truth_vs_model)' if self.truth_differs else '')
         wall = time.monotonic() - self.wall_start
         values = {
             'mode': 'lockstep' if self.lockstep else 'realtime',
             'sim_time': f'{self.core.plant.t:.6f}', 'wall_time': f'{wall:.3f}',
             'samples': c.samples, 'commands': c.commands, 'rejected_commands': c.rejected_commands,
-            'stale_commands': c.stale_commands, 'saturated_commands': c.saturated_commands,
+            'stale_commands': c.stale_commands, 'old_commands': c.old_commands,
+            'saturated_commands': c.saturated_commands,
             'timeout_samples': c.timeout_samples, 'timeouts': c.timeouts,
             'late_commands': c.late_commands, 'estop_samples': c.estop_samples,
             'overruns': self.overruns, 'malformed_commands': self.malformed_commands,
@@ -471,9 +589,12 @@ class SimNode(RwNode):
                 'recorder_hold_s': f'{self.recorder_hold_s:.3f}', 'recorder_given_up': self.recorder_given_up,
                 'malformed_progress': self.malformed_progress}
                if self.p['lockstep_recorder_window'] and self.lockstep else {}),
-            **fast_path_values(self),
+            'command_order': self.sub_cmd.summary(),
+            **self.claim.values(),
+            'truth_vs_model': self.truth_differs or 'same',
+            **self.health.values(),
         }
-        publish_diagnostic(self.pub_diag, self.get_clock().now().nanoseconds,
+        publish_diagnostic(self.pub_diag, self.diagnostics_stamp_ns(),
                            f'{self.get_namespace().rstrip("/")}/sim: plant', self.get_namespace(), level, msg,
                            values)
 

@@ -70,14 +70,16 @@ def test_latest_command_is_held_zero_order():
 
 def test_late_but_newer_command_is_accepted():
     """A command answering an older sample than the current one, but newer than the held one,
-    is accepted (it is the best the controller has); the hold restarts from its arrival."""
+    is accepted (it is the best the controller has); it is held until the sample it answers is
+    command_timeout_samples old."""
     core = make(n_timeout=3)
     tick(core, 1.0)                      # answers seq 0
     tick(core)
     seq, _, _ = core.sample()            # seq 2
     assert core.command(seq - 1, 2.5) == (True, '')
-    assert core.advance() == 2.5
-    assert core.last_command_k == seq
+    assert core.advance() == 2.5 and core.held_seq == 1
+    assert tick(core) == 2.5             # seq 3: 2 samples after seq 1
+    assert tick(core) == 0.0             # seq 4: 3 samples after: timeout
 
 
 # ----------------------------------------------------------------------- timeout
@@ -113,6 +115,35 @@ def test_timeout_of_one_sample_needs_a_command_every_sample():
     assert core.counters.timeouts == 1
     with pytest.raises(ValueError):
         make(n_timeout=0)
+
+
+def test_a_command_too_old_is_never_applied():
+    """A command answering a sample command_timeout_samples or more old (a controller catching
+    up on old states after a pause) is refused and counted: the motor stays at zero."""
+    core = make(n_timeout=3)
+    tick(core, 1.0)                                          # answers seq 0
+    for _ in range(4):
+        tick(core)                                           # seq 1..4: none; timed out
+    seq, _, _ = core.sample()                                # seq 5
+    ok, why = core.command(2, 7.0)                           # 3 samples old
+    assert not ok and 'old command' in why and core.counters.old_commands == 1
+    assert core.command(3, 6.0) == (True, '')                # 2 samples old: still applied
+    assert core.advance() == 6.0 and core.held_seq == 3
+
+
+def test_held_seq_says_which_command_is_held():
+    core = make(n_timeout=3)
+    assert core.held_seq == -1
+    tick(core, 1.0)
+    assert core.held_seq == 0
+    tick(core)
+    tick(core)
+    assert core.held_seq == 0                                # held, 2 samples old
+    tick(core)
+    assert core.held_seq == -1 and core.timed_out            # timeout: u = 0, no command held
+    core.estop = True
+    tick(core, 2.0)
+    assert core.held_seq == -1
 
 
 # ------------------------------------------------------------ refused commands

@@ -1,0 +1,194 @@
+"""The verdict of a run, from its bag alone, read with an independent reader.
+
+Used by the soak tests (``./rwpend soak``, ``make soak``), which look for death, not for a
+median: was the loop alive at the end, was the motor ever driven by a command computed from a
+state too old to act on, did a node latch, is every gap of the bag in its recording report?
+
+The bag is read with the ``rosbags`` library (:func:`read_run`), not with rwpend's own reader, so
+a fault in our reader cannot hide a fault in our recorder. :func:`judge` is pure numpy on the
+decoded columns, unit-tested on synthetic data.
+
+What is judged, and from which topic (θ from hanging, upright = π; x = wrap(θ − π)):
+
+* **balanced / falls / recoveries** (``sim/true_state``): "up" is |x| < ``up`` rad; a balance
+  episode is up for at least ``settle_s`` s; a *fall* is the end of an episode after which |x|
+  exceeds ``fallen`` rad; its *recovery* is the start of the next episode, and the time to
+  recover runs from the fall (|x| passing ``fallen``) to that start.
+* **alive at the end**: balanced over the last ``end_s`` s of the run.
+* **motor zero when nothing fresh** (``sim/true_state.command_seq``): over every sample k whose
+  held command is not zero, the command held answers a sample less than ``timeout_samples`` old
+  (k − 1 − command_seq < timeout_samples): the motor is never driven by a stale state, so it is at
+  zero within that many samples whenever the controller had no fresh state.
+* **no latch**: the estimator's ``state`` and the controller's ``command`` streams go on to the end
+  of the run (their last stamp within ``tail_s`` of the plant's last sample).
+* **gaps accounted for**: the seq gaps seen in the bag, per loop topic, equal those the
+  recorder's ``recording_report.json`` lists.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+LOOP_TYPES = {'PlantState': 'truth', 'StateEstimate': 'state', 'MotorCommand': 'command',
+              'EncoderCounts': 'encoders'}
+FIELDS = {'truth': ('seq', 'theta', 'u_commanded', 'command_seq', 'command_timeout'),
+          'state': ('seq', 'resyncs', 'missed'),
+          'command': ('seq', 'u'),
+          'encoders': ('seq',)}
+
+
+def read_run(bag_dir: str | Path) -> dict:
+    """The loop topics of a bag as numpy columns (``stamp`` in s; fields a bag lacks are absent),
+    the topics' names (``topics``), the last value of every /diagnostics key per status name
+    (``diagnostics``) and the recording report (``report``, {} if none) -- read with rosbags."""
+    from rosbags.highlevel import AnyReader
+    bag_dir = Path(bag_dir)
+    out: dict = {'topics': {}, 'diagnostics': {}}
+    with AnyReader([bag_dir]) as reader:
+        conns = {}
+        for c in reader.connections:
+            short = c.msgtype.rsplit('/', 1)[-1]
+            key = LOOP_TYPES.get(short)
+            if key and (key not in out['topics'] or len(c.topic) < len(out['topics'][key])):
+                out['topics'][key] = c.topic
+                conns[key] = c
+        cols = {k: {f: [] for f in ('stamp', *FIELDS[k])} for k in conns}
+        by_conn = {id(c): k for k, c in conns.items()}
+        wanted = list(conns.values()) + [c for c in reader.connections if c.topic == '/diagnostics']
+        for conn, _, raw in reader.messages(connections=wanted):
+            msg = reader.deserialize(raw, conn.msgtype)
+            key = by_conn.get(id(conn))
+            if key is None:                       # /diagnostics
+                for st in msg.status:
+                    d = out['diagnostics'].setdefault(st.name, {})
+                    d.update({kv.key: kv.value for kv in st.values})
+                    d['_level'] = int.from_bytes(st.level, 'little') if isinstance(st.level, bytes) else int(st.level)
+                    d['_message'] = st.message
+                continue
+            c = cols[key]
+            c['stamp'].append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+            for f in FIELDS[key]:
+                if hasattr(msg, f):
+                    c[f].append(getattr(msg, f))
+        for key, c in cols.items():
+            out[key] = {f: np.asarray(v) for f, v in c.items() if len(v) == len(c['stamp'])}
+    report = bag_dir / 'recording_report.json'
+    out['report'] = json.loads(report.read_text()) if report.exists() else {}
+    return out
+
+
+def wrap(a):
+    return (np.asarray(a, float) + np.pi) % (2 * np.pi) - np.pi
+
+
+def seq_gaps(seq) -> list[tuple[int, int]]:
+    """The missing seq ranges (first, last) of a stream: a seq more than one above the highest
+    seen before it opens a gap (duplicates and older seqs open none)."""
+    s = np.asarray(seq, np.int64)
+    if len(s) < 2:
+        return []
+    top = np.maximum.accumulate(s)[:-1]
+    idx = np.nonzero(s[1:] > top + 1)[0]
+    return [(int(top[i] + 1), int(s[i + 1] - 1)) for i in idx]
+
+
+@dataclass
+class Verdict:
+    duration_s: float = 0.0
+    alive_at_end: bool = False
+    balanced_s: float = 0.0           # time balanced (in episodes of at least settle_s)
+    catches: int = 0                  # balance episodes
+    falls: int = 0
+    recoveries: int = 0
+    recover_s: list = field(default_factory=list)
+    unsafe_samples: int = 0           # motor driven by a command too old (or none)
+    first_unsafe_s: float | None = None
+    latched: list = field(default_factory=list)     # streams that stopped before the end
+    gaps: dict = field(default_factory=dict)        # topic -> seen / reported
+    unaccounted: list = field(default_factory=list)  # topics whose gaps the report does not list
+    resyncs: int | None = None
+    problems: list = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def _episodes(t, up, settle_s):
+    """(start, end) times of the runs of ``up`` lasting at least settle_s."""
+    out = []
+    edges = np.diff(np.concatenate([[0], up.astype(np.int8), [0]]))
+    starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
+    for a, b in zip(starts, ends):
+        if t[b] - t[a] >= settle_s:
+            out.append((a, b))
+    return out
+
+
+def judge(run: dict, *, timeout_samples: int = 3, up: float = 0.3, fallen: float = 0.8,
+          settle_s: float = 1.0, end_s: float = 5.0, tail_s: float = 0.5) -> Verdict:
+    """The verdict of one run (see the module doc); ``run`` as :func:`read_run` returns it."""
+    v = Verdict()
+    truth = run.get('truth')
+    if truth is None or len(truth['stamp']) < 2:
+        v.problems.append('no sim/true_state in the bag: nothing to judge')
+        return v
+    t = truth['stamp'] - truth['stamp'][0]
+    v.duration_s = float(t[-1])
+    x = np.abs(wrap(truth['theta'] - np.pi))
+    eps = _episodes(t, x < up, settle_s)
+    v.catches = len(eps)
+    v.balanced_s = float(sum(t[b] - t[a] for a, b in eps))
+    for i, (a, b) in enumerate(eps):
+        after = np.nonzero(x[b + 1:] > fallen)[0]
+        if len(after) == 0:
+            continue
+        v.falls += 1
+        fall_t = t[b + 1 + after[0]]
+        nxt = [e for e in eps[i + 1:] if t[e[0]] > fall_t]
+        if nxt:
+            v.recoveries += 1
+            v.recover_s.append(round(float(t[nxt[0][0]] - fall_t), 3))
+    end = t > t[-1] - end_s
+    v.alive_at_end = bool(np.all(x[end] < up))
+    if not v.alive_at_end:
+        v.problems.append(f'not balanced over the last {end_s:g} s (max |theta - pi| {x[end].max():.2f} rad)')
+    if 'command_seq' in truth:
+        age = truth['seq'].astype(np.int64) - 1 - truth['command_seq'].astype(np.int64)
+        driven = truth['u_commanded'] != 0.0
+        bad = driven & ((truth['command_seq'] < 0) | (age >= timeout_samples))
+        v.unsafe_samples = int(bad.sum())
+        if v.unsafe_samples:
+            v.first_unsafe_s = float(t[np.argmax(bad)])
+            v.problems.append(f'{v.unsafe_samples} samples driven by a command {timeout_samples}+ samples '
+                              f'old (first at {v.first_unsafe_s:.3f} s)')
+    else:
+        v.problems.append('sim/true_state has no command_seq: the motor-zero rule cannot be judged')
+    t_end = truth['stamp'][-1]
+    for key in ('state', 'command'):
+        s = run.get(key)
+        if s is None or not len(s['stamp']) or s['stamp'][-1] < t_end - tail_s:
+            last = float(s['stamp'][-1] - truth['stamp'][0]) if s is not None and len(s['stamp']) else None
+            v.latched.append(key)
+            v.problems.append(f'{key} stopped before the end of the run (last at {last} s of {v.duration_s:.1f})')
+    state = run.get('state')
+    if state is not None and 'resyncs' in state and len(state['resyncs']):
+        v.resyncs = int(state['resyncs'][-1])
+    report_topics = run.get('report', {}).get('topics', {})
+    for key in ('truth', 'state', 'command', 'encoders'):
+        name = run['topics'].get(key)
+        cols = run.get(key)
+        if name is None or cols is None:
+            continue
+        seen = seq_gaps(cols['seq'])
+        listed = report_topics.get(name, {})
+        missing = sum(b - a + 1 for a, b in seen)
+        v.gaps[name] = {'seen': len(seen), 'missing': missing,
+                        'reported': listed.get('gap_count'), 'reported_missing': listed.get('missing')}
+        if listed and (listed.get('gap_count') != len(seen) or listed.get('missing') != missing):
+            v.unaccounted.append(name)
+            v.problems.append(f'{name}: {len(seen)} gaps ({missing} missing) in the bag, the report says '
+                              f'{listed.get("gap_count")} ({listed.get("missing")})')
+    return v

@@ -1,0 +1,80 @@
+"""rwpend_bag.judge: the verdict of a run from its bag, on synthetic runs (no ROS)."""
+from __future__ import annotations
+
+import numpy as np
+
+from rwpend_bag.judge import judge, seq_gaps
+
+H = 0.001
+
+
+def run(theta, u=None, command_seq=None, drop=(), state_until=None):
+    n = len(theta)
+    seq = np.arange(n)
+    t = seq * H
+    u = np.concatenate([[0.0], np.ones(n - 1)]) if u is None else np.asarray(u, float)  # no command before 0
+    truth = {'stamp': t + 100.0, 'seq': seq, 'theta': np.asarray(theta, float), 'u_commanded': u,
+             'command_seq': seq - 1 if command_seq is None else np.asarray(command_seq),
+             'command_timeout': np.zeros(n, bool)}
+    keep = np.ones(n, bool)
+    for a, b in drop:
+        keep[a:b + 1] = False
+    end = n if state_until is None else state_until
+    state = {'stamp': (t + 100.0)[keep][:end], 'seq': seq[keep][:end], 'resyncs': np.zeros(keep.sum())[:end]}
+    command = {'stamp': (t + 100.0)[keep], 'seq': seq[keep]}
+    gaps = seq_gaps(seq[keep])
+    missing = sum(b - a + 1 for a, b in gaps)
+    report = {'topics': {'/r/state': {'gap_count': len(gaps), 'missing': missing}}}
+    return {'truth': truth, 'state': state, 'command': command,
+            'topics': {'truth': '/r/sim/true_state', 'state': '/r/state', 'command': '/r/command'},
+            'report': report}
+
+
+def up_then(n_up, n_after, after_theta):
+    return np.concatenate([np.full(n_up, np.pi), np.full(n_after, after_theta)])
+
+
+def test_balanced_to_the_end_is_alive():
+    v = judge(run(np.full(10_000, np.pi + 0.05)))
+    assert v.alive_at_end and v.catches == 1 and v.falls == 0 and not v.problems
+
+
+def test_a_fall_then_a_recovery_is_counted_with_its_time():
+    theta = np.concatenate([np.full(3000, np.pi), np.full(2000, 0.0), np.full(6000, np.pi)])
+    v = judge(run(theta))
+    assert v.falls == 1 and v.recoveries == 1 and v.recover_s == [2.0] and v.alive_at_end
+
+
+def test_dead_at_the_end_and_a_latched_estimator():
+    v = judge(run(up_then(5000, 5000, 0.0), state_until=5000))
+    assert not v.alive_at_end and v.falls == 1 and v.recoveries == 0
+    assert v.latched == ['state'] and any('state stopped' in p for p in v.problems)
+
+
+def test_a_stale_command_driving_the_motor_is_unsafe():
+    n = 5000
+    cs = np.arange(n) - 1
+    cs[2000:2010] = 1995                       # held a command 4..13 samples old, u != 0
+    v = judge(run(np.full(n, np.pi), command_seq=cs))
+    assert v.unsafe_samples == 10 and abs(v.first_unsafe_s - 2.000) < 1e-9
+    u = np.ones(n)
+    u[0] = 0.0
+    u[2000:2010] = 0.0                         # ... at zero it is fine
+    assert judge(run(np.full(n, np.pi), u=u, command_seq=cs)).unsafe_samples == 0
+
+
+def test_gaps_must_be_those_the_report_lists():
+    r = run(np.full(8000, np.pi), drop=[(1000, 1099), (5000, 5009)])
+    v = judge(r)
+    assert v.gaps['/r/state'] == {'seen': 2, 'missing': 110, 'reported': 2, 'reported_missing': 110}
+    assert not v.unaccounted
+    r['report']['topics']['/r/state']['missing'] = 100
+    v = judge(r)
+    assert v.unaccounted == ['/r/state'] and any('the report says' in p for p in v.problems)
+
+
+def test_seq_gaps():
+    assert seq_gaps([0, 1, 2, 5, 6, 9]) == [(3, 4), (7, 8)]
+    assert seq_gaps([3, 3, 2, 4]) == []        # duplicates / a step back are no gaps
+    assert seq_gaps([0, 5, 3, 4, 9]) == [(1, 4), (6, 8)]
+    assert seq_gaps([]) == []

@@ -1,0 +1,84 @@
+"""Is the plant where an identification step needs it?  Pure checks (no rclpy, no numpy needed).
+
+The same functions judge the live state (the procedures of :mod:`rwpend_ident.procedures`, which
+refuse to start a step, or stop it, by raising :class:`NotReady`; the controller then turns off and
+reports the reason in ``controller/status``) and recorded data (the analysis of a bag).
+
+Angles in rad; a window is the angles of the last ``still_s`` seconds, one per sample.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+
+class NotReady(Exception):
+    """The plant is not where the step needs it (pendulum not at rest, wheel spinning, saturation
+    reached, the wheel did not break away ...): the reason, for the student."""
+
+
+@dataclass(frozen=True)
+class Rest:
+    """Tolerances of 'at rest, hanging': over ``still_s`` s the pendulum angle and the rotor angle
+    relative to the pendulum each move by at most ``tol`` rad (2 encoder counts by default), and
+    the pendulum hangs within ``hang`` rad of 0 (the encoders are zeroed hanging at rest)."""
+
+    still_s: float = 0.5       # long enough to see a count of swing and fit it (rwpend_ident.estimate)
+    tol: float = 2 * 2 * math.pi / 4000
+    hang: float = 0.05
+    timeout: float = 5.0       # s to wait for it before refusing the step
+
+
+def rest_problem(theta: Sequence[float], rel: Sequence[float], rest: Rest) -> str | None:
+    """Why the pendulum is not at rest hanging with the rotor still over this window (``theta``
+    pendulum angles, ``rel`` rotor angles relative to the pendulum), or None."""
+    if not theta:
+        return 'no samples to judge the pendulum by'
+    moved = max(theta) - min(theta)
+    if moved > rest.tol:
+        return (f'pendulum not at rest: it moved {moved:.4f} rad within {rest.still_s:g} s (at most '
+                f'{rest.tol:.4f}); hold it still and let go gently')
+    mean = sum(theta) / len(theta)
+    if abs(mean) > rest.hang:
+        return (f'pendulum not hanging: theta = {mean:.3f} rad at rest (expected 0 +- {rest.hang:g}; the '
+                'encoders must be zeroed with the pendulum hanging at rest)')
+    spun = max(rel) - min(rel)
+    if spun > rest.tol:
+        return (f'wheel spinning: the rotor turned {spun:.3f} rad relative to the pendulum within '
+                f'{rest.still_s:g} s; wait until it stops')
+    return None
+
+
+def saturation_problem(saturated_s: float, limit_s: float, what: str) -> str | None:
+    """'saturation reached' when the command has been at |u| = u_max for ``saturated_s`` s,
+    longer than ``limit_s`` (``what``: where, e.g. 'holding 400 rad/s')."""
+    if saturated_s > limit_s:
+        return (f'saturation reached {what}: |u| at its limit for {saturated_s:.2f} s (more than '
+                f'{limit_s:g} s); the friction needs more torque than the amplifier gives -- lower the speeds')
+    return None
+
+
+def direction_problem(u0: float, d_pendulum: float, d_rotor: float, count: float) -> str | None:
+    """Encoder and motor directions from the first torque pulse of sign ``u0``: by (2.15) the
+    rotor turns with u (theta_r'' = b_r (u - F)) and the pendulum against it
+    (theta'' = -b_p (u - F)).  ``d_pendulum``, ``d_rotor``: the largest moves (rad, signed) of the
+    pendulum and of the rotor relative to the pendulum during the response; ``count``: one count."""
+    s = 1.0 if u0 > 0 else -1.0
+    rotor = s * d_rotor
+    pend = s * d_pendulum
+    if abs(d_rotor) < 5 * count:
+        return (f'the rotor did not turn during a pulse of u = {u0:g} (moved {abs(d_rotor) / count:.0f} counts): '
+                'is the amplifier on and the motor connected?')
+    if abs(d_pendulum) < 1.5 * count:
+        return (f'the pendulum encoder did not move during a pulse of u = {u0:g}: is it connected?')
+    if rotor > 0 and pend < 0:
+        return None
+    if rotor < 0 and pend > 0:
+        return ('the motor turns against u: with u > 0 the rotor went negative and the pendulum positive '
+                '(the motor leads or the amplifier input are reversed)')
+    if rotor < 0:
+        return ('the motor encoder counts backwards: with u > 0 the rotor counts went down while the '
+                'pendulum moved against u as it should (swap the motor encoder channels A/B)')
+    return ('the pendulum encoder counts backwards: with u > 0 the rotor turned with u but the pendulum '
+            'counts went up (by (2.15) the pendulum moves against u; swap its channels A/B)')

@@ -1,0 +1,92 @@
+"""The refusal checks and the procedures that use them, sample by sample (no ROS)."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from rwpend_control.user_law import LawError, LawState, load_law
+from rwpend_ident.checks import NotReady, Rest, direction_problem, rest_problem, saturation_problem
+from rwpend_model.rig import load_rig
+
+COUNT = 2 * math.pi / 4000
+RIG = load_rig()
+
+
+def test_rest_problem():
+    r = Rest()
+    assert rest_problem([0.0] * 300, [1.0] * 300, r) is None
+    assert 'pendulum not at rest' in rest_problem([0.0, 0.01], [0.0, 0.0], r)
+    assert 'not hanging' in rest_problem([0.3] * 10, [0.0] * 10, r)
+    assert 'wheel spinning' in rest_problem([0.0] * 10, [0.0, 0.5], r)
+
+
+def test_direction_problem_tells_which_one_is_reversed():
+    assert direction_problem(3.0, -5 * COUNT, 500 * COUNT, COUNT) is None
+    assert direction_problem(-3.0, 5 * COUNT, -500 * COUNT, COUNT) is None
+    assert 'motor turns against u' in direction_problem(3.0, 5 * COUNT, -500 * COUNT, COUNT)
+    assert 'motor encoder counts backwards' in direction_problem(3.0, -5 * COUNT, -500 * COUNT, COUNT)
+    assert 'pendulum encoder counts backwards' in direction_problem(3.0, 5 * COUNT, 500 * COUNT, COUNT)
+    assert 'did not turn' in direction_problem(3.0, -5 * COUNT, 2 * COUNT, COUNT)
+
+
+def test_saturation_problem():
+    assert saturation_problem(0.2, 0.3, 'x') is None
+    assert 'saturation reached at 400 rad/s' in saturation_problem(0.31, 0.3, 'at 400 rad/s')
+
+
+def _state(t, theta=0.0, theta_dot=0.0, wheel=0.0, rate=0.0):
+    return LawState(t, theta, theta_dot, wheel, rate, 0.0)
+
+
+def _law(name, **params):
+    return load_law(f'rwpend_ident.procedures:{name}', params, RIG)
+
+
+def test_pulses_wait_for_rest_then_play_the_schedule():
+    law = _law('Pulses', times=[0.0, 0.02], values=[5.0, 0.0])
+    h = RIG.sample_period
+    us = [law(_state(k * h)) for k in range(700)]
+    start = next(k for k, u in enumerate(us) if u)
+    assert start == pytest.approx(round(Rest().still_s / h) - 1, abs=1)
+    assert us[start:start + 20] == [5.0] * 20 and us[start + 20] == 0.0
+
+
+def test_pulses_refuse_a_swinging_pendulum():
+    """A pendulum that does not come to rest: the step is refused with the reason (NotReady)."""
+    law = _law('Pulses', times=[0.0, 0.02], values=[5.0, 0.0], rest_timeout=1.0)
+    h = RIG.sample_period
+    with pytest.raises(LawError, match='NotReady: pendulum not at rest'):
+        for k in range(3000):
+            law(_state(k * h, theta=0.05 * math.sin(8.8 * k * h)))
+
+
+def test_wheel_speeds_stop_at_saturation():
+    law = _law('WheelSpeeds', kdr=0.2, ki=0.002, times=[0.0], refs=[5000.0], max_saturation_s=0.1)
+    h = RIG.sample_period
+    with pytest.raises(LawError, match='saturation reached'):
+        for k in range(2000):
+            law(_state(k * h))
+
+
+def test_breakaway_ramps_stop_when_the_rotor_slips():
+    law = _law('BreakawayRamps', signs=[1.0, -1.0], rate=2.0, slip_speed=5.0, u_limit=4.0)
+    h = RIG.sample_period
+    us, slip = [], False
+    for k in range(3000):
+        t = k * h
+        us.append(law(_state(t, rate=10.0 if slip else 0.0)))
+        slip = abs(us[-1]) > 1.5
+    assert max(us) == pytest.approx(1.5, abs=0.01) and min(us) == pytest.approx(-1.5, abs=0.01)
+    assert us[-1] == 0.0, 'both ramps done'
+
+
+def test_breakaway_ramps_refuse_a_blocked_wheel():
+    law = _law('BreakawayRamps', rate=2.0, u_limit=1.0)
+    with pytest.raises(LawError, match='did not break away'):
+        for k in range(3000):
+            law(_state(k * RIG.sample_period))
+
+
+def test_not_ready_is_an_exception_with_the_reason():
+    assert issubclass(NotReady, Exception) and str(NotReady('why')) == 'why'

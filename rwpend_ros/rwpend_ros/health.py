@@ -1,0 +1,105 @@
+"""The loop's health as the plant sees it, sample by sample (pure: no rclpy).
+
+The plant (simulator or driver) is the one place that sees the whole loop end to end: every
+sample goes out from it and every command comes back to it. :class:`LoopHealth` turns what it
+sees into three verdicts a user must hear about:
+
+* **dead**: the command timeout has held for ``dead_after`` samples in a row after the loop had
+  been running (a command had come): nothing answers any more -- an estimator or controller that
+  died or latched, a cut link. Reported once when it happens, again when the loop comes back,
+  and as the node's exit status when it is still dead at the end (``./rwpend up`` then fails).
+* **slow**: over the first ``check_window`` samples after the first command (the "first
+  seconds"), more than ``late_limit`` of the commands came after the next sample instant, or
+  the command timeout struck: this machine does not keep the sample rate with this layout --
+  the advice says what to do.
+* the counts for /diagnostics: late commands (all and over the last window), timeouts, deaths.
+"""
+from __future__ import annotations
+
+#: exit status of a node process whose loop was dead at the end (no fresh command for long
+#: before it stopped): ./rwpend up reports it and fails
+EXIT_LOOP_DEAD = 3
+
+#: advice printed with a "slow" verdict
+SLOW_ADVICE = ('run the loop in one process (./rwpend up --composed), give it real-time priority '
+               '(--rt-priority 50, as root or with an rtprio limit), keep other programs off the '
+               'machine, or sample more slowly (--h 0.002)')
+
+
+class LoopHealth:
+    """Call :meth:`command` for every command the plant accepts and :meth:`sample` once per
+    sample; each returns an event to report (``'dead'``, ``'alive'``, ``'slow'``) or None."""
+
+    def __init__(self, h: float, dead_after_s: float = 2.0, check_after_s: float = 5.0,
+                 late_limit: float = 0.01) -> None:
+        if not (h > 0 and dead_after_s > 0 and check_after_s > 0 and 0 <= late_limit <= 1):
+            raise ValueError('LoopHealth: h, dead_after_s and check_after_s must be > 0, '
+                             f'late_limit in [0, 1] (got {h}, {dead_after_s}, {check_after_s}, {late_limit})')
+        self.h = h
+        self.dead_after = max(1, round(dead_after_s / h))
+        self.check_window = max(1, round(check_after_s / h))
+        self.late_limit = late_limit
+        self.commands = 0          # commands accepted
+        self.samples = 0           # samples since the first command
+        self.late = 0              # samples whose command came after the next instant
+        self.timeouts = 0          # samples held at zero by the command timeout (after the first command)
+        self.timeout_run = 0       # consecutive such samples now
+        self.dead = False
+        self.deaths = 0            # times the loop was declared dead
+        self.longest_dead_s = 0.0
+        self.checked = False       # the first-window verdict was given
+        self.window_late = 0
+        self.window_timeouts = 0
+        self.verdict = ''          # the first-window verdict, for the start-up line and diagnostics
+
+    def command(self) -> str | None:
+        """A command was accepted: 'alive' when the loop was dead."""
+        self.commands += 1
+        self.timeout_run = 0
+        if self.dead:
+            self.dead = False
+            return 'alive'
+        return None
+
+    def sample(self, late: bool, timed_out: bool) -> str | None:
+        """One sample: ``late`` -- its command did not come before this instant; ``timed_out`` --
+        the command timeout holds the motor at zero over it."""
+        if not self.commands:
+            return None            # no loop yet: a plant alone, or still starting
+        self.samples += 1
+        self.late += bool(late)
+        event = None
+        if timed_out:
+            self.timeouts += 1
+            self.timeout_run += 1
+            self.longest_dead_s = max(self.longest_dead_s, self.timeout_run * self.h)
+            if not self.dead and self.timeout_run >= self.dead_after:
+                self.dead = True
+                self.deaths += 1
+                event = 'dead'
+        else:
+            self.timeout_run = 0
+        if not self.checked:
+            self.window_late += bool(late)
+            self.window_timeouts += bool(timed_out)
+            if self.samples >= self.check_window:
+                self.checked = True
+                frac = self.window_late / self.samples
+                self.verdict = (f'first {self.samples * self.h:.0f} s of the loop: {100 * frac:.2f} % of '
+                                f'the commands late, {self.window_timeouts} samples at zero by the '
+                                f'command timeout')
+                if frac > self.late_limit or self.window_timeouts:
+                    event = event or 'slow'
+        return event
+
+    def dead_reason(self) -> str:
+        return (f'the loop is dead: no fresh command for {self.timeout_run * self.h:.1f} s (the '
+                'estimator or the controller does not answer); the motor is held at zero')
+
+    def values(self) -> dict[str, str]:
+        """Key-values for /diagnostics."""
+        frac = self.late / self.samples if self.samples else 0.0
+        return {'loop_late_commands': str(self.late), 'loop_late_percent': f'{100 * frac:.3f}',
+                'loop_timeout_samples': str(self.timeouts), 'loop_dead': str(self.dead),
+                'loop_deaths': str(self.deaths), 'loop_longest_dead_s': f'{self.longest_dead_s:.3f}',
+                'loop_first_check': self.verdict or 'pending'}

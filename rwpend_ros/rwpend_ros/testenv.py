@@ -1,0 +1,22 @@
+"""Domain ids for tests (pure): every test that starts ROS takes a random ROS_DOMAIN_ID from
+``RWPEND_TEST_DOMAINS`` (``LO-HI``, default ``100-230``), so test runs side by side on one
+host can be kept apart by giving each its own range."""
+from __future__ import annotations
+
+import os
+import random
+
+
+def test_domain_id(env=None) -> int:
+    """A random domain id of ``RWPEND_TEST_DOMAINS`` (ValueError when malformed)."""
+    text = (os.environ if env is None else env).get('RWPEND_TEST_DOMAINS', '100-230')
+    try:
+        lo, hi = (int(v) for v in text.split('-'))
+    except ValueError:
+        raise ValueError(f'RWPEND_TEST_DOMAINS={text!r}: expected LO-HI, e.g. 100-230') from None
+    if not 0 <= lo <= hi <= 232:
+        raise ValueError(f'RWPEND_TEST_DOMAINS={text!r}: ids must be in 0..232, LO <= HI')
+    return random.SystemRandom().randint(lo, hi)
+
+
+test_domain_id.__test__ = False     # not a pytest test

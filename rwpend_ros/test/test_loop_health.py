@@ -1,0 +1,50 @@
+"""rwpend_ros.health.LoopHealth: the plant's verdicts on the loop (dead, alive, slow)."""
+from __future__ import annotations
+
+import pytest
+
+from rwpend_ros.health import LoopHealth
+
+
+def test_no_verdict_before_the_first_command():
+    h = LoopHealth(0.001, dead_after_s=0.01, check_after_s=0.01)
+    assert all(h.sample(late=True, timed_out=True) is None for _ in range(100))
+    assert not h.dead and h.samples == 0
+
+
+def test_dead_after_the_timeout_held_then_alive_again():
+    h = LoopHealth(0.001, dead_after_s=0.005, check_after_s=1.0)
+    h.command()
+    events = [h.sample(False, True) for _ in range(10)]
+    assert events.count('dead') == 1 and events.index('dead') == 4 and h.dead
+    assert 'no fresh command for' in h.dead_reason()
+    assert h.command() == 'alive' and not h.dead
+    assert [h.sample(False, False) for _ in range(3)] == [None] * 3
+    assert h.deaths == 1 and h.longest_dead_s == pytest.approx(0.010)
+
+
+def test_a_short_timeout_is_not_death():
+    h = LoopHealth(0.001, dead_after_s=0.005, check_after_s=1.0)
+    h.command()
+    for _ in range(4):
+        assert h.sample(False, True) is None
+    assert h.command() is None and not h.dead
+
+
+def test_first_window_verdict_slow_or_not():
+    ok = LoopHealth(0.001, check_after_s=0.1, late_limit=0.01)
+    ok.command()
+    assert [ok.sample(k == 50, False) for k in range(100)].count('slow') == 0   # 1 % late: fine
+    assert ok.checked and '1.00 %' in ok.verdict
+    slow = LoopHealth(0.001, check_after_s=0.1, late_limit=0.01)
+    slow.command()
+    events = [slow.sample(k % 10 == 0, False) for k in range(200)]
+    assert events.count('slow') == 1 and events.index('slow') == 99            # once, at the end of the window
+    assert slow.values()['loop_late_percent'] == '10.000'
+
+
+def test_bad_settings_refused():
+    with pytest.raises(ValueError):
+        LoopHealth(0.0)
+    with pytest.raises(ValueError):
+        LoopHealth(0.001, late_limit=2.0)
