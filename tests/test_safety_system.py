@@ -696,7 +696,10 @@ def run_fuzz(tmp_path, env, n_msgs, n_srv):
         P.node('controller', 'controller', {'mode': 'auto', 'state_queue_depth': 1000},
                ros=('-r', '__ns:=/fz_c'))
         P.node('estimator', 'estimator', {}, ros=('-r', '__ns:=/fz_e'))
-        P.node('sim', 'sim', {'start.encoders_subscribers': 0}, ros=('-r', '__ns:=/fz_s'))
+        # the simulator has no loop here (no controller in its namespace): a fuzzed command it
+        # happens to accept would start one that "dies" after the fuzz and fail the process (exit 3)
+        P.node('sim', 'sim', {'start.encoders_subscribers': 0, 'loop_dead_after': 1e6},
+               ros=('-r', '__ns:=/fz_s'))
         t0 = time.monotonic()
         script = tmp_path / 'fuzzer.py'
         script.write_text(FUZZER)
