@@ -67,8 +67,11 @@ def test_one_console_lists_and_drives_the_rigs_of_two_domains(tmp_path):
         def both():
             rows = {r['id']: r for r in api(port, '/api/overview')[1]['rigs']}
             ra, rb = rows.get(f'{a}:/rigA'), rows.get(f'{b}:/rigB')
-            return rows if ra and rb and ra['mode'] == 'wheel_velocity' and rb['mode'] == 'off' else None
-        rows = wait_for(both, 300, 'both rigs with their modes in the overview')
+            # the overview fills in as each node's status arrives: the mode (the controller's
+            # status) can come before the plant (the simulator's /diagnostics)
+            return rows if (ra and rb and ra['mode'] == 'wheel_velocity' and rb['mode'] == 'off'
+                            and rb['plant']) else None
+        rows = wait_for(both, 300, 'both rigs with their modes and plants in the overview')
         assert rows[f'{b}:/rigB']['plant'] == 'sim' and rows[f'{b}:/rigB']['level'] in ('ok', 'warn', 'error')
         status, r = api(port, '/api/mode', {'rig': f'{b}:/rigB', 'mode': 'wheel_velocity'})
         assert status == 200 and r['ok'], r
