@@ -227,6 +227,8 @@ class DriverNode(LifecycleNode):
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.link.set_active(not self.estop)    # a latched e-stop keeps the amplifier off
+        if self.first_published is None:
+            self.waiting_since = time.monotonic()   # the wait for subscribers starts now
         self.active = True
         self.lifecycle = 'active'
         self.get_logger().info('active: amplifier enabled, zero torque until commands arrive')
@@ -286,7 +288,8 @@ class DriverNode(LifecycleNode):
         wall clock as it read at start, advanced by the monotonic clock, so the stamps never go
         back when the wall clock is stepped (NTP): the subscribers' order gates (rwpend_ros.order)
         would take a stamp that goes back for a stale sample."""
-        if not self.active:
+        link = self.link
+        if not self.active or link is None:
             return
         if self.first_published is None and not self._listeners_ready(seq):
             self.samples_before_start += 1
@@ -298,14 +301,10 @@ class DriverNode(LifecycleNode):
         try:
             self.pub_enc.publish(wire.pack_encoders(header, seq, pc, mc))
             # after the encoders (the loop waits for those): what the motor was driven with
-            held = -1 if s.cmd_sample == P.NO_SAMPLE else seq - ((s.sample - s.cmd_sample) & MASK32)
-            self.pub_applied.publish(wire.pack_applied(header, seq, held,
-                                                       self.cfg.motor_sign * s.u_applied_milli / P.U_SCALE))
+            self.pub_applied.publish(wire.pack_applied(header, seq, *link.applied(seq, s)))
         except Exception:  # noqa: BLE001 - context shut down under the link thread
             self.stop.set()
-        link = self.link
-        if link is not None:
-            self._loop_event(self.loop.sample(False, link.timed_out))
+        self._loop_event(self.loop.sample(False, link.timed_out))
 
     def _listeners_ready(self, seq: int) -> bool:
         """Before the first published sample: True once ``start.encoders_subscribers`` listen to

@@ -592,6 +592,14 @@ class DriverLink:
                                 'old_commands')
         return None
 
+    def applied(self, seq: int, s: P.Sample) -> tuple[int, float]:
+        """What the motor was driven with over the interval ending at sample ``seq`` (the
+        AppliedCommand message): the seq of the sample the held command answered -- ``seq``
+        minus the device samples between that one and ``s`` -- or -1 when none was held, and
+        the held command in control units (after the device's clamp, with the motor sign)."""
+        held = -1 if s.cmd_sample == P.NO_SAMPLE else seq - ((s.sample - s.cmd_sample) & MASK32)
+        return held, self.cfg.motor_sign * s.u_applied_milli / P.U_SCALE
+
     def close(self) -> None:
         with self.lock:
             self.want_active = False

@@ -453,3 +453,16 @@ def test_summary_line_counts_what_happened():
     run(link, 20)
     text = link.summary()
     assert text.startswith('20 samples (0 lost') and 'the device refused 0 frames' in text
+
+
+def test_applied_command_names_the_sample_it_answered():
+    """AppliedCommand: the held command's sample in ROS seq (device samples back from this one,
+    across the u32 wrap), -1 when none was held; u in control units with the motor sign."""
+    link = DriverLink(LinkConfig(port='/dev/x', motor_sign=-1))
+    s = P.Sample(sample=1000, time_us=0, pendulum_counts=0, motor_counts=0, status=0,
+                 u_applied_milli=2500, cmd_sample=999, rx_bad=0)
+    assert link.applied(5000, s) == (4999, -2.5)
+    wrapped = s._replace(sample=1, cmd_sample=0xFFFFFFFE)          # three device samples back
+    assert link.applied(5000, wrapped) == (4997, -2.5)
+    none = s._replace(u_applied_milli=0, cmd_sample=P.NO_SAMPLE)
+    assert link.applied(5000, none) == (-1, 0.0)
