@@ -352,7 +352,7 @@ class ControllerNode(RwNode):
                 or self._since_status >= self.status_every:
             self._since_status = 0
             self._last_fault_kind = fault_kind
-            self.publish_status(st, Time(sec=sec, nanosec=nanosec))
+            self.publish_status(st, sec, nanosec)
             if st.note:
                 self.publish_diagnostics()
         if st.event is not None:
@@ -389,22 +389,17 @@ class ControllerNode(RwNode):
         self.last_status = st
         self._last_fault_kind = st.fault.split(':', 1)[0]
         self._since_status = 0
-        self.publish_status(st, stamp)
+        self.publish_status(st, stamp.sec, stamp.nanosec)
         self.publish_diagnostics()
         self.get_logger().warn(st.fault, throttle_duration_sec=1.0)
 
-    def publish_status(self, st, stamp) -> None:
-        m = ControllerStatus()
-        m.header.stamp = stamp
-        m.seq = st.seq
-        m.mode, m.law = st.mode, st.law
-        m.u, m.u_unsaturated = st.u, st.u_unsaturated
-        m.friction_compensation = st.friction_compensation
-        m.saturated = st.saturated
-        m.last_switch = _time_msg(st.last_switch)
-        m.switch_count = st.switch_count
-        m.reason, m.fault = st.reason, st.fault
-        self.pub_status.publish(m)
+    def publish_status(self, st, sec: int, nanosec: int) -> None:
+        """controller/status as wire bytes (rwpend_ros.wire: the same bytes for the same status,
+        so two lockstep runs record the same bag)."""
+        t = _time_msg(st.last_switch)
+        self.pub_status.publish(wire.pack_controller_status(
+            wire.pack_header(sec, nanosec, ''), st.seq, st.mode, st.law, st.u, st.u_unsaturated,
+            st.friction_compensation, st.saturated, (t.sec, t.nanosec), st.switch_count, st.reason, st.fault))
 
     def on_set_mode(self, req: SetMode.Request, resp: SetMode.Response) -> SetMode.Response:
         resp.previous_mode = self.ctrl.mode

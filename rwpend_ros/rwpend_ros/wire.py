@@ -261,3 +261,28 @@ def pack_diagnostic_array(sec: int, nanosec: int, statuses, frame_id: str = '') 
             _put_string(out, str(k))
             _put_string(out, str(v))
     return ENCAPSULATION + bytes(out)
+
+
+_STATUS_U = struct.Struct('<3d?')      # u, u_unsaturated, friction_compensation, saturated
+_STATUS_SWITCH = struct.Struct('<iII')  # last_switch.sec, last_switch.nanosec, switch_count
+
+
+def pack_controller_status(header: bytes, seq: int, mode: str, law: str, u: float, u_unsaturated: float,
+                           friction_compensation: float, saturated: bool, last_switch: tuple[int, int],
+                           switch_count: int, reason: str, fault: str) -> bytes:
+    """rwpend_msgs/ControllerStatus as wire bytes, its alignment padding zeros: rclpy's
+    serializer leaves the padding as it finds it in a reused buffer, so two lockstep runs
+    published the same status with different bytes (a bag that is not "the same bag",
+    rwpend_bag.sameness). ``last_switch``: (sec, nanosec)."""
+    out = bytearray(header)
+    out += bytes(_pad8(len(out)))
+    out += struct.pack('<Q', seq)
+    _put_string(out, mode)
+    _put_string(out, law)
+    out += bytes(_pad8(len(out)))
+    out += _STATUS_U.pack(u, u_unsaturated, friction_compensation, saturated)
+    out += bytes(_pad4(len(out)))
+    out += _STATUS_SWITCH.pack(*last_switch, switch_count & _U32_MAX)
+    _put_string(out, reason)
+    _put_string(out, fault)
+    return ENCAPSULATION + bytes(out)
