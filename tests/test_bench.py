@@ -16,7 +16,8 @@ RWPEND = str(ROOT / 'rwpend')
 def test_bench_runs_and_writes_json(tmp_path, ros_env):
     out = tmp_path / 'bench'
     p = subprocess.run([RWPEND, 'bench', '--duration', '2', '--lockstep-duration', '1', '--h', '0.001',
-                        '--layout', 'separate', '-o', str(out)], env=ros_env, capture_output=True,
+                        '--layout', 'separate', '--scale-max', '1', '--scale-duration', '2', '-o', str(out)],
+                       env=ros_env, capture_output=True,
                        text=True, timeout=140)
     assert p.returncode == 0, f'{p.stdout[-3000:]}\n{p.stderr[-3000:]}'
     assert 'real time' in p.stdout and 'lockstep' in p.stdout and 'bag decode' in p.stdout, p.stdout
@@ -54,6 +55,9 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
     dropped = res['lockstep'][1]['dropped']
     assert dropped and all(v == 0 for v in dropped.values()), dropped
 
+    # the scale run, one step of one rig (a full one adds rigs up to 8, 20 s each: make bench)
+    sc = res['scale']
+    assert sc['max_rigs'] == 1 and [s['rigs'] for s in sc['steps']] == [1], sc
     d = res['decode']
     assert d['messages'] > 0 and d['msgs_per_s'] > 0
     # bags are deleted unless --keep-bags; logs stay
@@ -69,7 +73,7 @@ def test_bench_composed_layouts_in_real_time_lose_nothing(tmp_path, ros_env):
     sample to the estimator of its process (rwpend_ros.intra). Each answers its samples and
     the recorder loses nothing."""
     out = tmp_path / 'bench'
-    p = subprocess.run([RWPEND, 'bench', '--duration', '3', '--h', '0.001', '--no-lockstep', '--no-decode',
+    p = subprocess.run([RWPEND, 'bench', '--duration', '3', '--h', '0.001', '--no-lockstep', '--no-decode', '--no-scale',
                         '--layout', 'control', '--layout', 'composed', '-o', str(out)], env=ros_env,
                        capture_output=True, text=True, timeout=140)
     assert p.returncode == 0, f'{p.stdout[-3000:]}\n{p.stderr[-3000:]}'
