@@ -19,19 +19,14 @@ import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import tempfile
 import time
 from pathlib import Path
 
+from rwpend_ros.testenv import free_port
+
 ROOT = Path(os.environ.get('RWPEND_ROOT', Path(__file__).resolve().parents[2]))
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
 
 
 def browser():

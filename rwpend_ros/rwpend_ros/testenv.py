@@ -1,10 +1,11 @@
-"""Domain ids for tests (pure): every test that starts ROS takes a random ROS_DOMAIN_ID from
-``RWPEND_TEST_DOMAINS`` (``LO-HI``, default ``100-230``), so test runs side by side on one
-host can be kept apart by giving each its own range."""
+"""Domain ids and ports for tests (pure): every test that starts ROS takes a random ROS_DOMAIN_ID
+from ``RWPEND_TEST_DOMAINS`` (``LO-HI``, default ``100-230``), so test runs side by side on one
+host can be kept apart by giving each its own range; a server under test gets a free port."""
 from __future__ import annotations
 
 import os
 import random
+import socket
 
 
 def test_domain_id(env=None) -> int:
@@ -20,3 +21,10 @@ def test_domain_id(env=None) -> int:
 
 
 test_domain_id.__test__ = False     # not a pytest test
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free now (the OS's choice)."""
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
