@@ -49,25 +49,19 @@ def argtype(fn):
     return parse
 
 
-def _rate(text) -> float:
-    v = float(text)
-    if not 1 <= v <= 500:
-        raise ValueError(f'a rate in 1..500 Hz, got {text}')
-    return v
+def _within(cast, lo, hi, what: str):
+    """A parser of ``cast(text)`` in [lo, hi]; ValueError naming ``what`` and the range."""
+    def parse(text):
+        v = cast(text)
+        if not lo <= v <= hi:
+            raise ValueError(f'{what} in {lo}..{hi}, got {text}')
+        return v
+    return parse
 
 
-def _window(text) -> float:
-    v = float(text)
-    if not 5 <= v <= 120:
-        raise ValueError(f'a window of 5..120 s, got {text}')
-    return v
-
-
-def _domain(text) -> int:
-    v = int(text)
-    if not 0 <= v <= 232:
-        raise ValueError(f'a ROS domain id in 0..232, got {text}')
-    return v
+_rate = _within(float, 1, 500, 'a rate (Hz)')
+_window = _within(float, 5, 120, 'a window (s)')
+_domain = _within(int, 0, 232, 'a ROS domain id')
 
 
 def _ns(text) -> str:
