@@ -153,6 +153,29 @@ def test_page_shows_the_swing_up_and_tunes_the_gains(browser, ros_env, tmp_path)
         log.close()
 
 
+@pytest.mark.timeout(600)
+def test_a_page_opened_before_the_rig_finds_it(browser, ros_env, tmp_path):
+    """The console alone, its page open (no rig yet: it says it waits), then the stack: the
+    page finds the rig by itself and its samples come in (it used to tell the user to reload:
+    a page opened while ``up --record`` still started stayed empty)."""
+    port = free_port()
+    log = open(tmp_path / 'console.log', 'w')
+    console = start(['console', '--port', str(port), '--no-bridge'], ros_env, log)
+    up = None
+    try:
+        wait_for(lambda: f'127.0.0.1:{port}' in log_text(tmp_path / 'console.log'), 120, 'the console to start')
+        browser.get(f'http://127.0.0.1:{port}/')
+        wait_for(lambda: 'waiting' in page_data(browser, "document.getElementById('conn').textContent"), 60,
+                 'the page to say it waits for a rig')
+        up = start(['up', '--mode', 'auto', '--duration', '120'], ros_env, open(tmp_path / 'up.log', 'w'))
+        wait_for(lambda: page_data(browser, 'rwpendStats.samples') > 20, 180, 'samples on the page')
+    finally:
+        if up is not None:
+            stop(up)
+        stop(console)
+        log.close()
+
+
 #: the page's last second of samples (50 Hz) all within 0.2 rad of upright
 UPRIGHT = ('rwpendPage.state.length >= 50 && rwpendPage.state.slice(-50).every(r => '
            'Math.abs((((r[1] - Math.PI + Math.PI) % (2 * Math.PI)) + 2 * Math.PI) % (2 * Math.PI) - Math.PI) < 0.2)')

@@ -543,12 +543,19 @@ function setupLab() {
 function start() {
   setupControls();
   drawLegend();
-  api('/api/overview').then((j) => {
+  // the first rig the console finds (or the one in the URL); asked again every second until
+  // there is one: a page opened while the stack still starts finds it when it comes
+  const findRig = () => api('/api/overview').then((j) => {
     if (!S.rig && j.rigs && j.rigs.length) S.rig = j.rigs[0].id;
-    if (!S.rig) { $('conn').textContent = 'no rig found yet: reload when one runs'; return; }
+    if (!S.rig) {
+      $('conn').textContent = 'no rig found yet: waiting for one';
+      setTimeout(findRig, 1000);
+      return;
+    }
     connect();
     loadParams();
-  });
+  }, () => setTimeout(findRig, 1000));
+  findRig();
   api('/api/info').then((j) => {
     if (j.token_required && !S.token) $('token-bar').hidden = false;
     if (j.window_s) S.window = j.window_s;
