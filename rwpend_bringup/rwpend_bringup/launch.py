@@ -75,8 +75,13 @@ def overrides_yaml(spec: NodeSpec) -> str:
     ``/**/<name>`` section above ``-p`` (which counts as ``/**``), so ``-p`` would lose
     against stack.yaml (measured: ``-p mode:=auto`` left the controller ``off``).
     """
+    return params_file_text(spec.node_params if spec.node_params is not None else {spec.name: spec.params})
+
+
+def params_file_text(sections: dict[str, dict]) -> str:
+    """A ROS 2 params file: per node name, its parameters (dotted names) as a ``/**/<name>``
+    section of nested keys (tuples written as lists)."""
     import yaml
-    sections = spec.node_params if spec.node_params is not None else {spec.name: spec.params}
     doc = {}
     for node, params in sections.items():
         nested: dict = {}

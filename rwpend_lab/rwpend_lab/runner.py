@@ -13,22 +13,8 @@ import sys
 import time
 from pathlib import Path
 
-import yaml
-
 from .data import load_run
 from .experiment import LabError, Run
-
-
-def nested(params: dict) -> dict:
-    """Dotted parameter names as the nested mapping of a params file."""
-    out: dict = {}
-    for name, value in params.items():
-        d = out
-        parts = name.split('.')
-        for p in parts[:-1]:
-            d = d.setdefault(p, {})
-        d[parts[-1]] = list(value) if isinstance(value, tuple) else value
-    return out
 
 
 def node_params(run: Run, plant: str) -> dict[str, dict]:
@@ -45,8 +31,8 @@ def node_params(run: Run, plant: str) -> dict[str, dict]:
 
 
 def params_file(run: Run, path: Path, plant: str) -> Path:
-    doc = {f'/**/{node}': {'ros__parameters': nested(p)} for node, p in node_params(run, plant).items() if p}
-    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    from rwpend_bringup.launch import params_file_text
+    path.write_text(params_file_text({node: p for node, p in node_params(run, plant).items() if p}))
     return path
 
 
