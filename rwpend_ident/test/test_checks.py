@@ -21,6 +21,17 @@ def test_rest_problem():
     assert 'wheel spinning' in rest_problem([0.0] * 10, [0.0, 0.5], r)
 
 
+def test_a_spread_of_two_counts_is_at_rest_however_it_is_rounded():
+    # 231 * COUNT - 229 * COUNT is above 2 * COUNT in floating point: a recorded rest the
+    # controller had accepted was refused by the bag's check for that
+    r = Rest()
+    for c in (229, 1000, -517, 3998):
+        rel = [c * COUNT, (c + 1) * COUNT, (c + 2) * COUNT]
+        assert rest_problem([0.0] * 3, rel, r) is None, c
+        assert rest_problem([0.0, 2 * COUNT, 0.0], [0.0] * 3, r) is None
+        assert 'wheel spinning' in rest_problem([0.0] * 4, rel + [(c + 3) * COUNT], r)
+
+
 def test_direction_problem_tells_which_one_is_reversed():
     assert direction_problem(3.0, -5 * COUNT, 500 * COUNT, COUNT) is None
     assert direction_problem(-3.0, 5 * COUNT, -500 * COUNT, COUNT) is None
