@@ -6,8 +6,8 @@ writes a complete rig file, with the parameters a free swing and the pulses dete
 to the emulator's truth -- or, where this machine does not keep the sample rate in a run (the
 recorder misses samples, the loop lags the plant), stops with that reason: an expected failure,
 reported as such; every parameter's identified value, CI and truth are printed (the
-figures of the issue's note). Real time on a shared machine: the looser parameters (friction,
-stiction, motor lag) are printed, not asserted."""
+figures of the issue's note). Real time on a shared machine: the parameters that depend most on
+the loop keeping the rate (friction, stiction, motor lag) are printed, not asserted."""
 from __future__ import annotations
 
 import json
@@ -28,7 +28,7 @@ REALTIME_SHORTFALL = re.compile(r'\d+ encoder samples missing in the recording|t
 #: the driver's summary of a run: commands sent, and refused as too old
 OLD_COMMANDS = re.compile(r'(\d+) commands sent, (\d+) old')
 #: relative tolerance of the parameters asserted on the real-time path
-TOLERANCE = {'a': 0.01, 'omega_p_stuck': 0.01, 'b_r': 0.05}
+TOLERANCE = {'a': 0.01, 'omega_p_stuck': 0.01, 'b_r': 0.05, 'b_p': 0.05, 'pendulum_energy_time_constant': 0.05}
 
 
 @pytest.mark.timeout(900)

@@ -42,19 +42,36 @@ def _fit(residuals, x0, names, **kw) -> FitResult:
 
 
 # ------------------------------------------------------------------ Experiment 1
+def swing_start(tp: np.ndarray, halves: int = 4, tol: float = 0.25) -> float | None:
+    """The time of the first turning point of the free swing proper: the first one followed by
+    ``halves`` half swings each within ``tol`` of the median half period (None without such).
+    A hand that held the pendulum still before it let go (on the rig) makes the first 'turning
+    point' the middle of the hold, a whole hold before the next one: the swing starts after it."""
+    gaps = np.diff(tp)
+    if len(gaps) < halves:
+        return None
+    half = float(np.median(gaps))
+    regular = np.abs(gaps - half) <= tol * half
+    for i in range(len(gaps) - halves + 1):
+        if regular[i:i + halves].all():
+            return float(tp[i])
+    return None
+
+
 def fit_swing(rig, d, name: str = 'swing') -> FitResult:
     """omega_p'^2 ('wp2'), damping c ('damping'), theta0, theta_dot0 of the free swing, from its first
-    turning point on (where the hand let go, or later).  IdentError when the pendulum hardly swung
+    turning point on (:func:`swing_start`: where the hand let go, or later).  IdentError when the pendulum hardly swung
     or the rotor slipped in the swing (then the stuck model does not hold)."""
     dl, h = rig.count_angle, rig.sample_period
     pc = np.asarray(d.pc, float)
     if np.any(np.isnan(pc)) or np.any(np.isnan(d.mc)):
         raise IdentError(f'{name}: encoder samples missing in the recording')
     tp, _ = M.turning_points(pc, np.arange(len(pc)) * h)
-    if np.ptp(pc) < 40 or len(tp) < 4:
-        raise IdentError(f'{name}: the pendulum did not swing (range {np.ptp(pc):.0f} counts): '
-                         f'lift it about 20 degrees and let go')
-    k0 = int(round(tp[0] / h))
+    start = swing_start(tp)
+    if np.ptp(pc) < 40 or start is None:
+        raise IdentError(f'{name}: the pendulum did not swing (range {np.ptp(pc):.0f} counts, {len(tp)} '
+                         f'turning points): lift it about 20 degrees and let go')
+    k0 = int(round(start / h))
     if np.ptp(d.mc[k0:]) > 3:
         raise IdentError(f'{name}: the rotor turned {np.ptp(d.mc[k0:]):.0f} counts relative to the pendulum '
                          'during the free swing (it should stick, Fig. 2.2): swing from a smaller angle, u = 0')

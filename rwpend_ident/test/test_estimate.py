@@ -119,6 +119,31 @@ def test_free_swing_starts_at_a_turning_point_and_refuses_a_slipping_rotor():
         E.fit_swing(BASE, d)
 
 
+def test_free_swing_after_a_hand_held_the_pendulum_starts_after_the_hold():
+    """On the rig the student holds the pendulum at 20 degrees, then lets go: the swing is fitted
+    from the first turning point after the release (from the middle of the hold, the damping came
+    out 188 +- 1286 s instead of 40 s), and the damping is found as without the hold."""
+    th0 = math.radians(20)
+    hold = range(150, 1650)
+
+    def hand(k, p):
+        if k in hold:
+            p.hold(th0)
+        return 0.0
+    d = run_data(hand, 9500)
+    res = E.fit_swing(BASE, d)
+    c = TRUTH.pendulum_damping * TRUTH.J / (TRUTH.J + TRUTH.j_r)
+    assert res.extra['k0'] > hold[-1]
+    assert abs(res['damping'] - c) <= min(0.01 * c, res.ci('damping'))
+    assert res['wp2'] == pytest.approx(TRUTH.omega_p_stuck ** 2, rel=1e-4)
+
+
+def test_swing_start():
+    assert E.swing_start(np.array([0.9, 2.0, 2.36, 2.72, 3.08, 3.44])) == 2.0
+    assert E.swing_start(np.array([0.0, 0.36, 0.72, 1.08, 1.44])) == 0.0
+    assert E.swing_start(np.array([0.0, 0.36, 1.5])) is None
+
+
 def test_a_pendulum_moving_before_the_pulse_is_refused():
     d = run_data(lambda k, p: 3.0 if 600 <= k < 650 else 0.0, 900, theta_dot=0.3, wheel_rate=0.3)
     with pytest.raises(IdentError, match='pulse: pendulum not at rest'):
