@@ -70,7 +70,7 @@ from rwpend_ros.runner import run_node
 from rwpend_ros.simtime import sample_time
 from rwpend_control.parameters import DESIGNED, controller_specs
 from rwpend_control.user_law import LawError, load_law
-from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
+from rwpend_control.supervisor import (STALE_FAULT, DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
                                        Controller, ControllerConfig, Status, design_group, gains_from_design)
 #: Period of the stale-state check (s, steady clock): the controller notices a silent state
 #: stream within state_timeout_samples h + this.  The plant's own command timeout zeros the
@@ -417,7 +417,7 @@ class ControllerNode(RwNode):
         if st is None:
             level, message = DiagnosticStatus.STALE, 'no state sample yet'
         elif ctrl.stale:
-            level, message = DiagnosticStatus.ERROR, self.stale_fault or 'stale state: u = 0'
+            level, message = DiagnosticStatus.ERROR, self.stale_fault or f'{STALE_FAULT}: u = 0'
         elif st.fault:
             level, message = DiagnosticStatus.ERROR, st.fault
         elif ctrl.law == 'brake' or ctrl.reason.startswith(('overspeed', 'saturated', 'fell')):

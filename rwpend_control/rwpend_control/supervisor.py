@@ -84,6 +84,10 @@ from .user_law import LawError, LawState
 from .safety import (BRAKE_DONE_SPEED, SATURATION_ACTIONS, WHEEL_SPEED_ACTIONS, StateWatchdog, brake,
                      motor_speed)
 
+#: how the fault of a sample the controller answered without a fresh state begins (readers of
+#: controller/status tell the loop's faults from a law's by it)
+STALE_FAULT = 'stale state'
+
 #: s of silence of the state stream after which its return starts the mode afresh (module doc);
 #: shorter stale episodes are answered with u = 0 and the law goes on
 FRESH_START_GAP = 0.05
@@ -771,7 +775,7 @@ class Controller:
         self._sat_since = None
         wd = self.watchdog
         n = self.config.state_timeout_samples
-        fault = (f'stale state: no new state for {wd.silence(now) * 1e3:.1f} ms (> {n} samples of '
+        fault = (f'{STALE_FAULT}: no new state for {wd.silence(now) * 1e3:.1f} ms (> {n} samples of '
                  f'{self.h * 1e3:g} ms) after seq {wd.last_seq}; u = 0')
         return Status(t=now, seq=min(wd.last_seq + 1, MAX_SEQ), mode=self.mode, law=self.law, u=0.0,
                       last_switch=self.last_switch, switch_count=self.switch_count, reason=self.reason,

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rwpend_control.supervisor import STALE_FAULT
 from rwpend_model.plant import Plant
 
 from .checks import Rest, direction_problem, rest_problem
@@ -42,7 +43,7 @@ def refused(name: str, d) -> None:
     """IdentError with the procedure's reason when it refused or stopped the step (a law fault on
     controller/status). Other faults -- a state a few ms late, on the rig in real time -- are the
     loop's, reported by it, and do not stop the identification."""
-    faults = [(t, f) for t, f in d.faults if not f.startswith('stale state')]
+    faults = [(t, f) for t, f in d.faults if not f.startswith(STALE_FAULT)]
     if faults:
         t, fault = faults[0]
         reason = fault.split('NotReady: ', 1)[-1]
