@@ -55,11 +55,33 @@ def rigs(a):
     return base, base_file, truth
 
 
+def check_inputs(a) -> None:
+    """IdentError for what can be judged before anything runs (so a refused identification
+    leaves nothing behind): the --set values, the bags of --from, the rig's port."""
+    from rwpend_bringup.cli import parse_assignment
+    for text in a.set:
+        try:
+            parse_assignment(text)
+        except ValueError as exc:
+            raise IdentError(f'--set: {exc}') from None
+    if a.bags:
+        from .session import bag_paths
+        bag_paths(a.bags)
+    elif a.plant.startswith('serial:') and not Path(a.plant[7:]).exists():
+        raise IdentError(f'{a.plant}: {a.plant[7:]} does not exist (the rig\'s serial device, or the '
+                         'emulator\'s --link path)')
+
+
 def out_dir(a) -> Path:
     out = Path(a.out or Path('id_out') / time.strftime('%Y%m%d_%H%M%S'))
+    if out.exists() and not out.is_dir():
+        raise IdentError(f'--out {out}: exists and is not a directory')
     if any((out / f).exists() for f in ('runs', 'rig.yaml', 'identification.json', 'check.json')):
         raise IdentError(f'{out} holds an identification already (choose a new --out directory)')
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise IdentError(f'--out {out}: {exc.strerror or exc}') from None
     return out
 
 
@@ -82,6 +104,7 @@ def main(argv=None) -> int:
         if a.plant != 'sim' and not (a.plant.startswith('serial:') and len(a.plant) > 7):
             raise IdentError(f"--plant must be 'sim' or 'serial:PORT', got {a.plant!r}")
         base, base_file, truth = rigs(a)
+        check_inputs(a)
         out = out_dir(a)
         status = identify(a, base, base_file, truth, out, t0)
     except IdentError as exc:

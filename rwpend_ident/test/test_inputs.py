@@ -68,6 +68,9 @@ def test_a_refused_step_stops_with_its_reason():
     (['--plant', 'serial:/dev/null', '--plant-rig', 'HEAVY'], '--plant-rig .* needs --plant sim'),
     (['--plant', 'usb'], "--plant must be 'sim' or 'serial:PORT'"),
     (['--from', 'NOWHERE'], 'not a bag directory'),
+    (['--plant', 'serial:NOWHERE'], 'does not exist'),
+    (['--set', 'kpp=3'], '--set: expected NODE.PARAM=VALUE'),
+    (['--set', 'wheel.kpp=3'], "--set: unknown node 'wheel'"),
 ])
 def test_cli_refuses_bad_input_and_writes_nothing(tmp_path, capsys, args, match):
     text = default_rig_file().read_text()
@@ -79,7 +82,14 @@ def test_cli_refuses_bad_input_and_writes_nothing(tmp_path, capsys, args, match)
     argv = [str(subst.get(a, a)) for a in args] + ['--out', str(out)]
     assert cli.main(argv) == 2
     assert re.search(match, capsys.readouterr().err)
-    assert not (out / 'rig.yaml').exists()
+    assert not out.exists()           # refused before anything ran: not even the directory
+
+
+def test_cli_refuses_an_out_that_is_a_file(tmp_path, capsys):
+    (tmp_path / 'f').write_text('mine')
+    assert cli.main(['--out', str(tmp_path / 'f')]) == 2
+    assert 'exists and is not a directory' in capsys.readouterr().err
+    assert (tmp_path / 'f').read_text() == 'mine'
 
 
 def test_cli_error_messages(tmp_path, capsys):
