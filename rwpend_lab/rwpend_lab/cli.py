@@ -144,6 +144,8 @@ def run_main(argv) -> int:
         if a.out is None:
             a.out = str(Path('lab_out') / (time.strftime('%Y%m%d_%H%M%S') if a.many
                                            else f'exp{nums[0]:02d}_{time.strftime("%Y%m%d_%H%M%S")}'))
+        if Path(a.out).exists() and not Path(a.out).is_dir():
+            raise LabError(f'--out {a.out}: exists and is not a directory')
         lab_rig(a.set)
         failed = [n for n in nums if not run_one(n, a)['passed']]
     except LabError as exc:

@@ -69,6 +69,10 @@ def test_cli_errors_are_clear(capsys, tmp_path):
     assert main(['run', '1', '--plant', 'usb']) == 2
     assert main(['list']) == 0 and 'Friction compensation' in capsys.readouterr().out
     assert main(['template', '1']) == 2
+    (tmp_path / 'file').write_text('mine')
+    assert main(['run', '1', '--out', str(tmp_path / 'file')]) == 2
+    assert 'exists and is not a directory' in capsys.readouterr().err
+    assert (tmp_path / 'file').read_text() == 'mine'
 
 
 def test_procedures_follow_their_schedules():
