@@ -7,7 +7,8 @@ where permitted, ``--composed control``), with the controller ``off`` when the r
 (``Run.arm_after``).  A monitor node in this process takes the encoder samples and feeds them to
 :class:`rwpend_lab.manual.StepSequence`, which says when to print each prompt (``>>> ...``), when
 a step was seen, when to switch the controller to the run's mode (a ``set_parameters`` call, as
-``./rwpend param set controller mode ...``) and when the run is over; then the stack is stopped.
+``./rwpend param set controller mode ...``); :class:`rwpend_lab.arming.Arming` says when that call is
+made again and when the run is over; then the stack is stopped.
 The recorded run is cut to what the simulator run holds (:func:`rwpend_lab.data.trim`, from the
 origin the steps give) and analysed as on the simulator.
 
@@ -26,6 +27,7 @@ from pathlib import Path
 
 from . import runner
 from .data import first_command, load_run, trim
+from .arming import Arming
 from .experiment import LabError, Run
 from .manual import StepSequence
 
@@ -33,10 +35,6 @@ from .manual import StepSequence
 START_S = 30.0
 #: seconds a prompt waits for its step before the run is given up
 PROMPT_TIMEOUT_S = 120.0
-#: seconds the end of a run waits for a controller that lags the plant to answer its last sample
-CATCH_UP_S = 5.0
-#: seconds a refusal of the run's mode is retried (the controller's state catching up)
-ARM_RETRY_S = 1.0
 #: the share of the run's samples the cut bag must hold
 MIN_SHARE = 0.9
 
@@ -48,13 +46,10 @@ class Monitor:
     def __init__(self, steps: StepSequence, ns: str, mode: str, log, rt_priority: int = 0) -> None:
         self.steps, self.ns, self.mode, self._log = steps, ns, mode, log
         self.rt_priority = rt_priority
-        self.steps_done = False
-        self.steps_done_at: float | None = None
         self.command_seq = -1          # the newest sample the controller answered
-        self.arm_retries = 0
-        #: monotonic time the run ends when the controller was armed: its mode came into force
-        #: when the call was answered, whatever sample this monitor had reached by then
-        self.end_wall: float | None = None
+        #: the arming call and the run's end; the run's time starts when the mode came into force
+        #: (the call answered), whatever sample this monitor had reached by then
+        self.arming = Arming(steps.duration_n * steps.h)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.error = ''
         self.done = threading.Event()
@@ -77,6 +72,10 @@ class Monitor:
 
     def finished(self) -> bool:
         return self.done.is_set()
+
+    @property
+    def arm_retries(self) -> int:
+        return self.arming.retries
 
     def close(self) -> None:
         self.stop.set()
@@ -140,8 +139,8 @@ class Monitor:
                 executor.add_node(node)
                 self.ready.set()
                 started = time.monotonic()
-                # the arming call: (future, seq, resend at, request, refusals retried until)
-                pending = None
+                future, request = None, None     # the arming call in flight
+                arming = self.arming
                 while not self.stop.is_set() and not self.done.is_set():
                     executor.spin_once(timeout_sec=0.05)
                     if not self.listening:
@@ -155,38 +154,24 @@ class Monitor:
                         self.error = (f'no encoder sample from the driver within {START_S:g} s (is the rig '
                                       f'connected and powered? the driver\'s log says why)')
                         self.done.set()
-                    if pending is not None and not pending[0].done() and time.monotonic() > pending[2]:
-                        # no answer (a response lost while discovery settles): the same request
-                        # again -- setting the mode is idempotent
-                        self.arm_retries += 1
-                        pending = (setter.call_async(pending[3]), pending[1], time.monotonic() + 0.5, pending[3],
-                                   pending[4])
-                    if pending is not None and pending[0].done():
-                        result = pending[0].result()
-                        ok = result is not None and result.results and result.results[0].successful
+                    if future is not None and not future.done() and arming.unanswered(time.monotonic()):
+                        future = setter.call_async(request)
+                    if future is not None and future.done():
+                        result = future.result()
+                        ok = bool(result is not None and result.results and result.results[0].successful)
                         why = result.results[0].reason if result is not None and result.results else 'no answer'
-                        if not ok and time.monotonic() < pending[4]:
-                            # the controller judges the mode on its state, which may be a few
-                            # samples behind the counts the steps were seen on (after a jump of
-                            # the counts the estimator re-synchronises first): asked again
-                            self.arm_retries += 1
-                            time.sleep(0.05)
-                            pending = (setter.call_async(pending[3]), pending[1], time.monotonic() + 0.5,
-                                       pending[3], pending[4])
+                        answer = arming.answered(ok, why, self.mode, time.monotonic())
+                        future = None
+                        if answer == 'again':
+                            time.sleep(arming.retry_pause_s)
+                            future = setter.call_async(request)
                             continue
-                        if not ok:
-                            self.error = f'the controller refused mode {self.mode!r}: {why}'
+                        if answer == 'refused':
+                            self.error = arming.error
                             self.done.set()
                         else:
-                            self.log(f'          controller: mode {self.mode} (sample {pending[1]})')
-                            self.end_wall = time.monotonic() + self.steps.duration_n * self.steps.h
-                        pending = None
-                    now = time.monotonic()
-                    if self.steps_done and pending is None and (self.end_wall is None or now >= self.end_wall) \
-                            and (self.command_seq >= (self.steps.end or 0) or self.steps_done_at is None
-                                 or now - self.steps_done_at > CATCH_UP_S):
-                        # over when the controller has answered the run's last sample too (a
-                        # loop that lags the plant is waited for, up to CATCH_UP_S)
+                            self.log(f'          controller: mode {self.mode} (sample {arming.armed_seq})')
+                    if arming.over(time.monotonic(), self.command_seq, self.steps.end):
                         self.done.set()
                     while not self.events.empty():
                         ev = self.events.get_nowait()
@@ -199,16 +184,15 @@ class Monitor:
                                 self.error = f'{tool.fqn("controller")}/set_parameters is not available'
                                 self.done.set()
                                 break
-                            req = SetParameters.Request(parameters=[
+                            request = SetParameters.Request(parameters=[
                                 Parameter(name='mode', value=to_parameter_value(self.mode))])
-                            now = time.monotonic()
-                            pending = (setter.call_async(req), ev.seq, now + 0.5, req, now + ARM_RETRY_S)
+                            arming.ask(ev.seq, time.monotonic())
+                            future = setter.call_async(request)
                         elif ev.kind == 'timeout':
                             self.error = ev.text
                             self.done.set()
                         elif ev.kind == 'done':
-                            self.steps_done = True
-                            self.steps_done_at = time.monotonic()
+                            arming.steps_done(time.monotonic())
                 executor.remove_node(node)
                 executor.shutdown(timeout_sec=1.0)
         except Exception as exc:  # noqa: BLE001 - said to the runner, which stops the stack
