@@ -11,7 +11,6 @@ from the advertised ros2msg schemas with ``rosbags``, not rclpy):
 from __future__ import annotations
 
 import asyncio
-import signal
 import subprocess
 import time
 from pathlib import Path
@@ -20,7 +19,7 @@ import numpy as np
 import pytest
 
 from rwpend_console.wsclient import Client, decode, encode, message_class
-from rwpend_ros.testenv import free_port
+from rwpend_ros.testenv import free_port, stop_processes
 
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
@@ -42,13 +41,7 @@ def rig(tmp_path_factory):
                                stderr=subprocess.STDOUT, start_new_session=True)
               for p, listen in zip(ports, ('127.0.0.1', '0.0.0.0'))]
     yield env, ports, logdir / 'stack.log'
-    for p in reversed(procs):
-        p.send_signal(signal.SIGINT)
-    for p in procs:
-        try:
-            p.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            p.kill()
+    stop_processes(procs)
     log.close()
 
 

@@ -5,14 +5,13 @@ from __future__ import annotations
 import http.client
 import json
 import os
-import signal
 import subprocess
 import time
 from pathlib import Path
 
 import pytest
 
-from rwpend_ros.testenv import free_port, test_domain_id
+from rwpend_ros.testenv import free_port, stop_processes, test_domain_id
 
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
@@ -77,13 +76,7 @@ def test_one_console_lists_and_drives_the_rigs_of_two_domains(tmp_path):
         lights = api(port, f'/api/rig?rig={a}:/rigA')[1]['lights']
         assert {'late', 'timeouts', 'faults', 'estop', 'node:sim', 'node:controller'} <= {x['key'] for x in lights}
     finally:
-        for p in reversed(procs):
-            p.send_signal(signal.SIGINT)
-        for p in procs:
-            try:
-                p.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        stop_processes(procs)
         log.close()
 
 
@@ -126,9 +119,5 @@ def test_an_experiment_started_from_the_console_writes_its_report(tmp_path):
         assert resp.status == 200 and 'data:image/png;base64,' in html and 'Experiment 3' in html
         c.close()
     finally:
-        console.send_signal(signal.SIGINT)
-        try:
-            console.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            console.kill()
+        stop_processes([console])
         log.close()

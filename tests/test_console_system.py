@@ -15,9 +15,7 @@ Selenium through the system's chromedriver; ``make test`` installs both).
 """
 from __future__ import annotations
 
-import os
 import shutil
-import signal
 import subprocess
 import time
 from pathlib import Path
@@ -27,7 +25,7 @@ import pytest
 
 from rwpend_bag.analysis import _decode
 from rwpend_bag.reader import read_bag
-from rwpend_ros.testenv import free_port
+from rwpend_ros.testenv import free_port, stop_processes
 
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
@@ -76,13 +74,7 @@ def start(args, env, log):
 
 
 def stop(p, timeout=60):
-    if p.poll() is None:
-        p.send_signal(signal.SIGINT)
-        try:
-            p.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
+    stop_processes([p], timeout)
 
 
 def param_get(env, *names, node='controller'):

@@ -1,11 +1,14 @@
 """Domain ids and ports for tests (pure): every test that starts ROS takes a random ROS_DOMAIN_ID
 from ``RWPEND_TEST_DOMAINS`` (``LO-HI``, default ``100-230``), so test runs side by side on one
-host can be kept apart by giving each its own range; a server under test gets a free port."""
+host can be kept apart by giving each its own range; a server under test gets a free port; the
+processes a test started are stopped as Ctrl-C stops them."""
 from __future__ import annotations
 
 import os
 import random
+import signal
 import socket
+import subprocess
 
 
 def test_domain_id(env=None) -> int:
@@ -28,3 +31,18 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(('127.0.0.1', 0))
         return s.getsockname()[1]
+
+
+def stop_processes(procs, timeout: float = 60.0) -> None:
+    """Stop processes as Ctrl-C does: SIGINT to each still running, the last started first (all
+    before any is waited for, so they shut down side by side), then each waited for; one still
+    running ``timeout`` s later is killed."""
+    for p in reversed(procs):
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
