@@ -67,9 +67,11 @@ def check_inputs(a) -> None:
     if a.bags:
         from .session import bag_paths
         bag_paths(a.bags)
-    elif a.plant.startswith('serial:') and not Path(a.plant[7:]).exists():
-        raise IdentError(f'{a.plant}: {a.plant[7:]} does not exist (the rig\'s serial device, or the '
-                         'emulator\'s --link path)')
+    elif a.plant.startswith('serial:'):
+        from rwpend_lab.rigrun import port_problem
+        why = port_problem(a.plant)
+        if why:
+            raise IdentError(why)
 
 
 def out_dir(a) -> Path:

@@ -60,8 +60,8 @@ def swing_start(tp: np.ndarray, halves: int = 4, tol: float = 0.25) -> float | N
 
 def fit_swing(rig, d, name: str = 'swing') -> FitResult:
     """omega_p'^2 ('wp2'), damping c ('damping'), theta0, theta_dot0 of the free swing, from its first
-    turning point on (:func:`swing_start`: where the hand let go, or later).  IdentError when the pendulum hardly swung
-    or the rotor slipped in the swing (then the stuck model does not hold)."""
+    turning point on (:func:`swing_start`: where the hand let go, or later).  IdentError when the
+    pendulum hardly swung or the rotor slipped in the swing (then the stuck model does not hold)."""
     dl, h = rig.count_angle, rig.sample_period
     pc = np.asarray(d.pc, float)
     if np.any(np.isnan(pc)) or np.any(np.isnan(d.mc)):

@@ -64,10 +64,9 @@ class Arming:
 
     def answered(self, ok: bool, why: str, mode: str, now: float) -> str:
         """The controller's answer: 'armed' (the run's time starts now), 'again' (refused for
-        now: ask again after ``retry_pause_s``), or 'refused' (``error`` says why)."""
+        now: ask again after ``retry_pause_s``), or 'refused' (``error`` says why). Only
+        while a call is pending (after :meth:`ask`)."""
         call = self.call
-        if call is None:
-            return 'armed' if self.end_wall is not None else 'refused'
         if ok:
             self.call = None
             self.armed_seq = call.seq

@@ -224,6 +224,14 @@ class RigRun:
     arm_retries: int
 
 
+def port_problem(plant: str) -> str | None:
+    """Why ``serial:PORT`` cannot be a rig's link (the port is not there), or None."""
+    port = plant.split(':', 1)[1]
+    if not Path(port).exists():
+        return f'{plant}: {port} does not exist (the rig\'s serial device, or the emulator\'s --link path)'
+    return None
+
+
 def record_run(run: Run, rig, out: Path, plant: str, sets=(), extra=(), log=print, prog: str = 'rwpend lab',
                error=LabError) -> RigRun:
     """One run on the rig, recorded to ``out/runs/<name>``: the stack of ``up --plant PORT
@@ -233,10 +241,9 @@ def record_run(run: Run, rig, out: Path, plant: str, sets=(), extra=(), log=prin
     and ``./rwpend identify --plant serial:``."""
     from rwpend_bringup import cli
     from rwpend_bringup.launch import Launcher
-    port = plant.split(':', 1)[1]
-    if not Path(port).exists():
-        raise error(f'{plant}: {port} does not exist (the rig\'s serial device, or the emulator\'s '
-                    f'--link path)')
+    why = port_problem(plant)
+    if why:
+        raise error(why)
     runs_dir = out / 'runs'
     runs_dir.mkdir(parents=True, exist_ok=True)
     bag = runs_dir / run.name
