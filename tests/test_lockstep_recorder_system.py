@@ -1,4 +1,4 @@
-"""System test: a lockstep run keeps pace with its recorder (the simulator's
+"""System test: a lockstep run of separate processes keeps pace with its recorder (the simulator's
 ``lockstep_recorder_window``, the recorder's ``--progress``), so a recorder that stalls slows the
 run down instead of losing messages; one that stops reporting for ``lockstep_recorder_timeout``
 is given up on, loudly, and the run finishes."""
@@ -38,8 +38,10 @@ def run_with_a_stalled_recorder(bag: Path, env: dict, duration: float, stall_s: 
     """./rwpend up --lockstep --record BAG; once the run has started (sample 0 is out when the
     simulator logs the controller's first switch, the swing-up), the recorder is stopped
     (SIGSTOP) for ``stall_s`` s. Returns (exit code, output)."""
+    # the recorder in a process of its own (separate layout): in the loop's process it takes the
+    # bytes directly and cannot be stalled alone
     proc = subprocess.Popen([RWPEND, 'up', '--lockstep', '--duration', str(duration), '--mode', 'auto',
-                             '--record', str(bag), *extra], env=env, stdout=subprocess.PIPE,
+                             '--composed', 'none', '--record', str(bag), *extra], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
     started = threading.Event()

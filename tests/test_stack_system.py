@@ -277,5 +277,5 @@ def test_lockstep_recorder_records_everything(tmp_path, ros_env):
             if key.endswith('_order'):
                 orders[(name, key)] = value
     assert len(orders) >= 4, orders
-    for key, value in orders.items():
-        assert 'duplicates 0, stale 0' in value, (key, value)
+    for key, value in orders.items():   # the loop's own stages take no topic: nothing to gate
+        assert value == 'in the loop' or 'duplicates 0, stale 0' in value, (key, value)

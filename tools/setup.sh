@@ -13,7 +13,7 @@ ROOT=$PWD
 VENV=$ROOT/.venv
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
-PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_bringup rwpend_lab rwpend_ident rwpend_console"
+PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_loop rwpend_bringup rwpend_lab rwpend_ident rwpend_console"
 
 need_apt=""
 if [ "${1:-}" = --browser ]; then   # the console's page tests (make test): Debian's chromium + its driver

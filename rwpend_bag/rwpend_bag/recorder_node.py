@@ -59,7 +59,10 @@ def qos_dict(q) -> dict:
 
 class Recorder(Node):
     def __init__(self, out_dir: str, topics: list[str] | None, record_all: bool,
-                 progress: str | None = None, sim_time: bool = False):
+                 progress: str | None = None, sim_time: bool = False, direct: dict | None = None):
+        """``direct``: {topic: (type name, offered QoS list)} of topics whose messages are put
+        into :attr:`writer` by their publishers in this process (rwpend_loop.host), not
+        subscribed."""
         super().__init__('recorder')
         #: publisher of the progress (the newest /clock taken), None without --progress
         self.progress_pub = None
@@ -76,6 +79,10 @@ class Recorder(Node):
         self.skipped: dict[str, str] = {}
         self._closed = False
         self._received = 0
+        self.direct_received = 0
+        self.direct = dict(direct or {})
+        for name, (type_name, qos) in self.direct.items():
+            self.writer.add_topic(name, type_name, qos)
         self.create_timer(POLL_S, self.discover)
         self.get_logger().info(f'recording to {out_dir} '
                                f'({"all topics" if record_all else ", ".join(sorted(self.wanted))}; '
@@ -84,7 +91,7 @@ class Recorder(Node):
 
     def discover(self) -> None:
         for name, types in self.get_topic_names_and_types():
-            if name in self.subs or name in self.skipped or name == self.progress_topic:
+            if name in self.subs or name in self.skipped or name == self.progress_topic or name in self.direct:
                 continue     # (its own progress: not part of the run)
             if not self.record_all and name not in self.wanted:
                 continue

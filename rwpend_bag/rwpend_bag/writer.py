@@ -286,6 +286,10 @@ class ThreadedBagWriter:
     def put(self, topic: str, data: bytes, log_time_ns: int) -> None:
         self._q.put(('msg', topic, data, log_time_ns))
 
+    def queue_size(self) -> int:
+        """Messages put and not yet taken by the writer thread."""
+        return self._q.qsize()
+
     def _failed(self, exc: BaseException) -> None:
         self.errors += 1
         if self.error is None:

@@ -38,22 +38,25 @@ from pathlib import Path
 from .launch import DEFAULT_NS, Launcher, NodeSpec
 
 ROOT = Path(os.environ.get('RWPEND_ROOT', Path(__file__).resolve().parents[2]))
-MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto')
+MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto', 'law')
 NODE_MODULES = {
     'sim': 'rwpend_sim.sim_node',
     'estimator': 'rwpend_estimation.estimator_node',
     'controller': 'rwpend_control.controller_node',
     'driver': 'rwpend_driver.driver_node',
 }
-#: ``--composed`` values: which nodes share one process (rwpend_bringup.composed)
-COMPOSITIONS = ('all', 'control')
+#: ``--composed`` values: which nodes share one process (rwpend_bringup.composed); ``loop``: the
+#: plant, estimator, controller and recorder in the loop's process (rwpend_loop.host)
+COMPOSITIONS = ('loop', 'all', 'control')
 #: ./rwpend up --lockstep --record: samples the simulator may run ahead of the recorder
 LOCKSTEP_RECORDER_WINDOW = 50
 #: ./rwpend up in real time: the loop's SCHED_FIFO priority where permitted (--rt-priority)
 DEFAULT_RT_PRIORITY = 50
 #: ./rwpend up without --composed: the layout per plant (PERFORMANCE.md, "Layouts")
-DEFAULT_LAYOUT = {'sim': 'control', 'serial': 'control'}
-LAYOUT_TEXT = {'none': 'separate processes (plant, estimator, controller)',
+DEFAULT_LAYOUT = {'sim': 'loop', 'serial': 'control'}
+LAYOUT_TEXT = {'loop': 'the loop in one real-time thread of one process (simulator, estimator, controller '
+                       'and the recorder as its nodes)',
+               'none': 'separate processes (plant, estimator, controller)',
                'control': 'estimator + controller in one process, the plant in its own',
                'all': 'plant, estimator and controller in one process'}
 
@@ -271,7 +274,9 @@ def choose_defaults(a) -> list[str]:
         a.composed = 'all'
     given = getattr(a, 'composed', None)
     layout = given or DEFAULT_LAYOUT[plant]
-    if layout == 'all' and plant != 'sim':
+    if given is None and getattr(a, 'only', None):
+        layout = 'none'         # a stack split across hosts: each part a process of its own
+    if layout in ('all', 'loop') and plant != 'sim':
         layout = 'control' if given is None else layout
     a.composed = None if layout == 'none' else layout
     notes.append(f'layout: {LAYOUT_TEXT[layout]}' + ('' if given else f' (the default for --plant {plant}; '
@@ -411,7 +416,12 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         composed = 'all'
     if composed == 'none':
         composed = None
-    if composed:
+    if composed == 'loop':
+        if plant != 'sim':
+            raise ValueError('--composed loop needs the simulator (--plant sim): the driver runs in '
+                             'its own process (--composed control keeps it there)')
+        specs = loop_layout(specs, a)
+    elif composed:
         if composed not in COMPOSITIONS:
             raise ValueError(f'--composed must be one of {", ".join(COMPOSITIONS)}, got {composed!r}')
         if composed == 'all' and plant != 'sim':
@@ -465,6 +475,28 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         specs.append(console_spec(a, plant_spec))
     files = [str(model_file), str(stack_file()), *map(str, a.params)]
     return select_part(specs, getattr(a, 'only', None)), files
+
+
+def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
+    """The simulator, estimator, controller and recorder of ``specs`` as nodes of one loop
+    process (rwpend_loop.host): the sample path in one thread, the bag written from the bytes the
+    nodes publish. The simulator's start-up waits for subscribers are for separate processes
+    and are dropped (the host waits for what is outside it)."""
+    members = [s for s in specs if s.name in ('sim', 'estimator', 'controller')
+               and s.module == NODE_MODULES[s.name]]
+    sim = members[0]
+    for key in ('start.encoders_subscribers', 'start.true_state_subscribers', 'start.state_subscribers',
+                'lockstep_recorder_window'):
+        sim.params.pop(key, None)
+    args = [s.name for s in members]
+    rest = [s for s in specs if s not in members]
+    rec = next((s for s in rest if s.name == 'recorder'), None)
+    if rec is not None:
+        rest.remove(rec)
+        args += ['--record', str(a.record)] + (['--sim-time'] if a.lockstep else [])
+    host = NodeSpec('loop', 'rwpend_loop.host', args=args, node_params={s.name: s.params for s in members},
+                    stop_rank=min(s.stop_rank for s in members))
+    return [host, *rest]
 
 
 def select_part(specs: list[NodeSpec], only: str | None) -> list[NodeSpec]:
@@ -574,7 +606,7 @@ def judge_run(a, specs, exit_codes: dict, status: int, wall_s: float, interrupte
               'no fresh command for seconds; see its log above)', file=sys.stderr, flush=True)
         status = EXIT_LOOP_DEAD
     names = {s.name for s in specs}
-    if not a.record or 'recorder' not in names:
+    if not a.record or not names & {'recorder', 'loop'}:
         return status
     report_file = Path(a.record) / 'recording_report.json'
     try:
@@ -586,7 +618,7 @@ def judge_run(a, specs, exit_codes: dict, status: int, wall_s: float, interrupte
     h = next((float(s.params['rig.sample_period']) for s in specs if 'rig.sample_period' in s.params),
              None) or _rig_sample_period()
     expected = expected_samples(h, a.duration, a.lockstep, wall_s, interrupted)
-    if not a.duration and not names & {'sim', 'driver', 'stack'}:
+    if not a.duration and not names & {'sim', 'driver', 'stack', 'loop'}:
         # a host without the plant (up --only recorder): its own wall time says nothing of the
         # plant's samples
         expected = None

@@ -55,6 +55,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
+from std_msgs.msg import Bool
 
 from rwpend_msgs.msg import ControllerStatus, MotorCommand, StateEstimate
 from rwpend_msgs.srv import SetMode
@@ -65,7 +66,7 @@ from rwpend_ros.diagnostics import publish_diagnostic
 from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
-from rwpend_ros.qos import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_STATUS
+from rwpend_ros.qos import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS
 from rwpend_ros.runner import run_node
 from rwpend_ros.simtime import sample_time
 from rwpend_control.parameters import DESIGNED, controller_specs
@@ -84,9 +85,13 @@ def _time_msg(t: float) -> Time:
 
 
 class ControllerNode(RwNode):
-    def __init__(self, bus=None, **node_kwargs) -> None:
-        """``bus``: the in-process bus of a composed process (rwpend_ros.intra); node_kwargs go
-        to rclpy Node (context, parameter_overrides, namespace) for tests."""
+    def __init__(self, bus=None, hosted: bool = False, **node_kwargs) -> None:
+        """``bus``: the in-process bus of a composed process (rwpend_ros.intra), or the loop
+        lock of the loop's process; ``hosted``: the loop's process (rwpend_loop.host) runs
+        :attr:`ctrl` every sample and calls :meth:`publish_result` -- no ``state`` subscription
+        and no stale-state watchdog here (the state cannot stop coming inside the loop);
+        node_kwargs go to rclpy Node (context, parameter_overrides, namespace) for tests."""
+        self.hosted = bool(hosted)
         super().__init__('controller', bus=bus, **node_kwargs)
         self.param_table = ParameterTable(self)
         self.rig = declare_rig(self.param_table)
@@ -143,17 +148,20 @@ class ControllerNode(RwNode):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         depth = p['state_queue_depth']
         # also taken directly from an estimator in this process (composed mode, rwpend_ros.intra)
-        self.sub_state = local_subscription(self, StateEstimate, 'state', self.on_state,
-                           QoSProfile(reliability=QOS_CONTROL_LATEST.reliability,
-                                      history=QOS_CONTROL_LATEST.history, depth=depth,
-                                      durability=QOS_CONTROL_LATEST.durability))
+        self.sub_state = None if self.hosted else local_subscription(
+            self, StateEstimate, 'state', self.on_state,
+            QoSProfile(reliability=QOS_CONTROL_LATEST.reliability, history=QOS_CONTROL_LATEST.history,
+                       depth=depth, durability=QOS_CONTROL_LATEST.durability))
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
+        # the plant's e-stop as it is (latched, from the simulator or the driver)
+        self.create_subscription(Bool, 'estop/state', self.on_estop_state, QOS_LATCHED)
         # in the loop's slack: after the command of a sample, not while a state waits (19.)
         self.diag_timer = SlackTimer(self, 1.0, self.publish_diagnostics)
         self.create_timer(0.05, self._do_sync)
         # steady clock: fires while sim time stands still too (a stale state in lockstep shows
         # as sim time moving on without states; judged on the node's clock in _check_stale)
-        self.create_timer(WATCHDOG_PERIOD, self._check_stale, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if not self.hosted:
+            self.create_timer(WATCHDOG_PERIOD, self._check_stale, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.cmd_msg = MotorCommand()
         self.last_status = None
         c = self.ctrl.config
@@ -248,6 +256,8 @@ class ControllerNode(RwNode):
     def _mode_possible(self, mode) -> tuple[bool, str]:
         if not isinstance(mode, str) or mode not in MODES:
             return False, f'mode must be one of {", ".join(MODES)}, got {mode!r}'
+        if self.ctrl.estopped and mode != 'off':
+            return False, f'mode {mode} refused: the e-stop is raised (clear it first: ./rwpend estop --clear)'
         x = self.ctrl._last_x
         if mode == 'balance' and mode != self.ctrl.mode and x is not None and abs(x) > self.ctrl.config.theta_0:
             return False, (f'balance refused: |theta-pi| = {abs(x):.3g} > theta_0 = '
@@ -331,18 +341,25 @@ class ControllerNode(RwNode):
             u, st = 0.0, Status(t=t, seq=seq, mode=self.ctrl.mode, law=self.ctrl.law,
                                 last_switch=self.ctrl.last_switch, switch_count=self.ctrl.switch_count,
                                 reason=self.ctrl.reason, fault=f'internal error: {type(exc).__name__}: {exc}')
+        if not math.isfinite(u) or abs(u) > self.ctrl.u_max:   # pragma: no cover - saturated above
+            u = 0.0
+        self.publish_result(header, seq, u, st, sec, nanosec)
+
+    def publish_result(self, header: bytes, seq: int, u: float, st, sec: int, nanosec: int) -> bytes | None:
+        """What the law gave for state ``seq``: ``command`` (with the state's header), the
+        status when due or changed, the log lines of switches and faults; returns the
+        command's bytes (None: the state was refused unanswered)."""
         if not st.answer:
             self.unanswered += 1
             self.get_logger().warn(st.fault, throttle_duration_sec=1.0)
-            return
-        if not math.isfinite(u) or abs(u) > self.ctrl.u_max:   # pragma: no cover - saturated above
-            u = 0.0
+            return None
         if st.note:
             self.stale_fault = ''
             self.get_logger().info(st.note, throttle_duration_sec=1.0)
         if self.trace is not None:
             self.trace('ctl.pub', seq)
-        self.pub_cmd.publish(wire.pack_command(header, seq, u, self.controller_id))
+        cmd = wire.pack_command(header, seq, u, self.controller_id)
+        self.pub_cmd.publish(cmd)
         self.samples += 1
         self.diag_timer.sample_done()
         self._since_status += 1
@@ -369,6 +386,7 @@ class ControllerNode(RwNode):
                 self._schedule_sync([Parameter('mode', value=self.ctrl.mode)])
         if st.fault:
             self.get_logger().warn(st.fault, throttle_duration_sec=1.0)
+        return cmd
 
     def _check_stale(self) -> None:
         """Timer: no new state for state_timeout_samples h on the node's clock -> one zero
@@ -400,6 +418,17 @@ class ControllerNode(RwNode):
         self.pub_status.publish(wire.pack_controller_status(
             wire.pack_header(sec, nanosec, ''), st.seq, st.mode, st.law, st.u, st.u_unsaturated,
             st.friction_compensation, st.saturated, (t.sec, t.nanosec), st.switch_count, st.reason, st.fault))
+
+    def on_estop_state(self, msg: Bool) -> None:
+        """The plant's e-stop: raised -> off at once; cleared -> still off until a mode is set."""
+        if self.ctrl.estop(bool(msg.data)):
+            ev = self.ctrl.events[-1]
+            self.get_logger().warn(f'switch {ev.from_} -> {ev.to}: {ev.reason}')
+            self._schedule_sync([Parameter('mode', value=self.ctrl.mode)])
+            self.publish_status(Status(t=self.ctrl.t, seq=self.ctrl.watchdog.last_seq or 0, mode=self.ctrl.mode,
+                                       law=self.ctrl.law, last_switch=self.ctrl.last_switch,
+                                       switch_count=self.ctrl.switch_count, reason=self.ctrl.reason),
+                                *divmod(self.get_clock().now().nanoseconds, 1_000_000_000))
 
     def on_set_mode(self, req: SetMode.Request, resp: SetMode.Response) -> SetMode.Response:
         resp.previous_mode = self.ctrl.mode
@@ -443,7 +472,7 @@ class ControllerNode(RwNode):
                 'law_errors': self.law_errors, 'param_errors': self.param_errors,
                 'malformed_states': self.malformed_states,
                 'friction_compensation': self.ctrl.config.friction_compensation,
-                'state_order': self.sub_state.summary(),
+                'state_order': self.sub_state.summary() if self.sub_state is not None else 'in the loop',
                 'controller_id': format_id(self.controller_id),
             })
 

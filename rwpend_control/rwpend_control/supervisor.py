@@ -101,7 +101,13 @@ MAX_FRICTION = 100.0        # control units
 MAX_SEQ = 2**64 - 1         # seq is a uint64
 
 
+#: the reasons of the switches to off when the plant's e-stop is raised and cleared
+ESTOP_RAISED = 'e-stop raised: off (zero torque) until a mode is set after it is cleared'
+ESTOP_CLEARED = 'e-stop cleared: off (zero torque) until a mode is set'
+
+
 @dataclass(frozen=True)
+
 class SwitchEvent:
     """A change of mode or law: at time t, from ``from_`` to ``to`` (``mode/law``), and why."""
 
@@ -439,6 +445,8 @@ class Controller:
         self.last_switch = 0.0
         self.switch_count = 0
         self.reason = 'start'
+        #: the plant's e-stop is raised (:meth:`estop`): no mode but off until it is cleared
+        self.estopped = False
         self.bad_state_count = 0
         self.overspeed_trips = 0
         self.saturation_trips = 0
@@ -516,12 +524,32 @@ class Controller:
         self._pending = ev
         self._sat_since = None
 
+    def estop(self, raised: bool, t: float | None = None) -> bool:
+        """The plant's e-stop was raised or cleared. Raised: mode off (a switch, reason
+        :data:`ESTOP_RAISED`), and no other mode until it is cleared. Cleared: the controller
+        stays off -- zero torque -- until a mode is set again, as a hardware watchdog stays latched
+        until re-armed (reason :data:`ESTOP_CLEARED`). Returns whether anything changed."""
+        t = self.t if t is None else t
+        if raised:
+            if self.estopped:
+                return False
+            self.estopped = True
+            self._switch(t, 'off', 'off', ESTOP_RAISED)
+            return True
+        if not self.estopped:
+            return False
+        self.estopped = False
+        self._switch(t, 'off', 'off', ESTOP_CLEARED)
+        return True
+
     def set_mode(self, mode: str, t: float | None = None) -> tuple[bool, str]:
         """Request a mode; (ok, message).  Unknown modes, and ``balance`` with the pendulum
         farther than theta_0 from upright, are refused (nothing changes).  ``off`` also stops
         a wheel brake in progress."""
         if mode not in MODES:
             return False, f'unknown mode {mode!r} (one of {", ".join(MODES)})'
+        if self.estopped and mode != 'off':
+            return False, f'mode {mode} refused: the e-stop is raised (clear it first: ./rwpend estop --clear)'
         t = self.t if t is None else t
         if mode == self.mode and not (mode == 'off' and self.law != 'off'):
             return True, f'already in {mode}'

@@ -228,3 +228,20 @@ def test_wheel_angle_pd_reaches_reference():
     c = ctrl('wheel_angle', wheel_angle_ref=10.0, friction_compensation='model')
     tr = simulate(c, Plant(rig), 3.0, feed='counts')
     assert tr.wheel_angle[-1] == pytest.approx(10.0, abs=0.3)
+
+
+def test_estop_switches_off_and_a_cleared_estop_stays_off_until_a_mode_is_set():
+    from rwpend_control.supervisor import ESTOP_CLEARED, ESTOP_RAISED
+    c = ctrl('auto')
+    c.update(0.0, 0, 0.1, 0.0, 0.0, 0.0)
+    assert c.estop(True) and (c.mode, c.law, c.reason) == ('off', 'off', ESTOP_RAISED)
+    assert not c.estop(True), 'raised twice changes nothing'
+    ok, msg = c.set_mode('auto')
+    assert not ok and 'e-stop is raised' in msg and c.mode == 'off'
+    u, st = c.update(0.001, 1, 0.1, 0.0, 0.0, 0.0)
+    assert u == 0.0 and st.event is not None and st.reason == ESTOP_RAISED
+    assert c.estop(False) and (c.mode, c.reason) == ('off', ESTOP_CLEARED)
+    u, _ = c.update(0.002, 2, 0.1, 0.0, 0.0, 0.0)
+    assert u == 0.0, 'still zero torque after the clear'
+    assert c.set_mode('auto')[0] and c.mode == 'auto'
+    assert not c.estop(False), 'a clear without a raise changes nothing'

@@ -47,7 +47,7 @@ from rwpend_ros import wire
 from rwpend_ros.claim import CommandClaim, format_id
 from rwpend_ros.diagnostics import publish_diagnostic
 from rwpend_ros.health import EXIT_LOOP_DEAD, LoopHealth
-from rwpend_ros.nodes import SlackTimer, local_subscription
+from rwpend_ros.nodes import SlackTimer, estop_subscriptions, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS
@@ -146,7 +146,10 @@ class DriverNode(LifecycleNode):
             self.claim = CommandClaim(p['claim_timeout_samples'])
         except ValueError as exc:
             raise ConfigError(f'claim_timeout_samples {exc}') from exc
-        self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
+        estop_subscriptions(self, self.on_estop_topic)
+        #: the plant's e-stop as it is (latched): the controller and the console follow it
+        self.pub_estop_state = self.create_publisher(Bool, 'estop/state', QOS_LATCHED)
+        self.pub_estop_state.publish(Bool(data=False))
         self.create_service(SetBool, '~/estop', self.on_estop_service)
         # in the loop's slack: after a command is written, not while one waits (PERFORMANCE.md 19.)
         self.diag_timer = SlackTimer(self, p['diagnostics_period'], self.publish_diagnostics)
@@ -402,6 +405,7 @@ class DriverNode(LifecycleNode):
         if link is not None and self.active:
             link.set_active(not on)     # off: zero command + ENABLE 0; on: ENABLE 1, zero until a command
         if changed:
+            self.pub_estop_state.publish(Bool(data=bool(on)))
             # one call site per severity: rclpy refuses a severity change at a call site
             if on:
                 self.get_logger().warning('E-STOP raised: motor at zero, amplifier disabled')

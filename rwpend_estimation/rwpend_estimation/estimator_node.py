@@ -86,10 +86,21 @@ PARAMS = [_config_spec(name, default) for name, default in asdict(EstimatorConfi
 ]
 
 
+#: ``~/reset`` is refused until this long after the last non-zero command (s)
+RESET_QUIET_S = 0.5
+
+
 class EstimatorNode(RwNode):
-    def __init__(self, bus=None, **node_kwargs) -> None:
-        """``bus``: the in-process bus of a composed process (rwpend_ros.intra); node_kwargs go
-        to rclpy Node (e.g. context, parameter_overrides, namespace) for tests."""
+    def __init__(self, bus=None, hosted: bool = False, **node_kwargs) -> None:
+        """``bus``: the in-process bus of a composed process (rwpend_ros.intra), or the loop
+        lock of the loop's process; ``hosted``: the loop's process (rwpend_loop.host) steps the
+        estimator (:attr:`stage`) and calls :meth:`publish_estimate` -- no subscription of
+        ``encoders`` or ``command`` here; node_kwargs go to rclpy Node (e.g. context,
+        parameter_overrides, namespace) for tests."""
+        self.hosted = bool(hosted)
+        #: the loop's estimator stage (rwpend_loop.loop.EstimatorStage) when hosted: it steps
+        #: :attr:`est`, and is given the new one when the settings change
+        self.stage = None
         super().__init__('estimator', bus=bus, **node_kwargs)
         self.param_table = ParameterTable(self)
         self.rig = declare_rig(self.param_table)
@@ -110,6 +121,8 @@ class EstimatorNode(RwNode):
         self.last_error = ''
         self.switches = 0
         self._resyncs_seen = 0
+        self.last_drive_seq: int | None = None   # newest sample answered by a non-zero command
+        self.refused_resets = 0
 
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
@@ -124,9 +137,11 @@ class EstimatorNode(RwNode):
         # (rwpend_ros.intra: deferred). Encoders: from the sample loop of a simulator of this
         # process (real time; in lockstep the simulator writes them to DDS, rwpend_sim.sim_node).
         # Each subscription's order gate drops duplicates and older messages (rwpend_ros.order)
-        self.sub_enc = local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL)
-        self.sub_cmd = local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL)
-        self.command_topic = self.sub_cmd.topic_name
+        self.sub_enc = self.sub_cmd = None
+        if not self.hosted:
+            self.sub_enc = local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL)
+            self.sub_cmd = local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL)
+            self.command_topic = self.sub_cmd.topic_name
         self.create_service(Trigger, '~/reset', self.on_reset)
         # in the loop's slack: after the state of a sample, not while a sample waits (19.)
         self.diag_timer = SlackTimer(self, float(period), self.publish_diagnostics)
@@ -167,6 +182,8 @@ class EstimatorNode(RwNode):
         if config == self.config:
             return
         self.est = switch_estimator(self.est, config)
+        if self.stage is not None:
+            self.stage.est = self.est
         self.config = config
         self.state_packer.set_estimator(config.estimator)
         self.switches += 1
@@ -185,7 +202,14 @@ class EstimatorNode(RwNode):
             return
         self.command(seq, u)
 
+    def note_command(self, seq: int, u: float) -> None:
+        """A command that answered sample ``seq``: a non-zero one means the loop drives the
+        rig (``~/reset`` is refused for :data:`RESET_QUIET_S` after it)."""
+        if u != 0.0 and (self.last_drive_seq is None or seq > self.last_drive_seq):
+            self.last_drive_seq = seq
+
     def command(self, seq: int, u: float) -> None:
+        self.note_command(seq, u)
         try:
             released = self.align.command(seq, u)
         except ValueError as exc:
@@ -231,6 +255,11 @@ class EstimatorNode(RwNode):
             self.last_error = f'seq {seq}: {exc}'
             self.get_logger().warn(self.last_error, throttle_duration_sec=1.0)
             return
+        self.publish_estimate(msg.header, seq, e)
+
+    def publish_estimate(self, header: bytes, seq: int, e) -> bytes:
+        """The estimate of sample ``seq``: ``state`` and ``joint_states`` (with the sample's
+        header), the re-synchronisation log line; returns the state's bytes."""
         self.samples += 1
         if e.resyncs != self._resyncs_seen:
             self._resyncs_seen = e.resyncs
@@ -239,15 +268,34 @@ class EstimatorNode(RwNode):
                                    f'{gs.resyncs} re-synchronisations so far', throttle_duration_sec=1.0)
         if self.trace is not None:
             self.trace('est.pub', seq)
-        self.pub_state.publish(self.state_packer.pack(
-            msg.header, seq, e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate, e.friction, e.energy,
-            e.resyncs, e.missed))
+        state = self.state_packer.pack(header, seq, e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate,
+                                       e.friction, e.energy, e.resyncs, e.missed)
+        self.pub_state.publish(state)
         if self.publish_joint_states:
-            self.pub_joints.publish(self.joint_packer.pack(
-                msg.header, e.theta, e.wheel_angle - e.theta, e.theta_dot, e.wheel_rate - e.theta_dot))
+            self.joints = self.joint_packer.pack(
+                header, e.theta, e.wheel_angle - e.theta, e.theta_dot, e.wheel_rate - e.theta_dot)
+            self.pub_joints.publish(self.joints)
+        else:
+            self.joints = None
         self.diag_timer.sample_done()
+        return state
 
     def on_reset(self, req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
+        """Re-zero the encoders at the newest sample -- refused while the loop drives the rig
+        (a non-zero command within :data:`RESET_QUIET_S`): zeroing at, say, the upright pose
+        makes theta jump by pi, and the controller would call it a fall."""
+        n = self.est.newest_sample
+        quiet = max(1, round(RESET_QUIET_S / self.rig.sample_period))
+        if n is not None and n[0] is not None and self.last_drive_seq is not None \
+                and n[0] - self.last_drive_seq < quiet:
+            self.refused_resets += 1
+            resp.success = False
+            resp.message = (f'reset refused: the loop is driving the rig (a non-zero command answered seq '
+                            f'{self.last_drive_seq}, {(n[0] - self.last_drive_seq) * self.rig.sample_period * 1e3:.0f} ms '
+                            f'ago); set the controller off (./rwpend mode off), let the pendulum hang '
+                            f'at rest, then reset')
+            self.get_logger().warn(resp.message)
+            return resp
         self.est.reset()
         resp.success = True
         n = self.est.newest_sample
@@ -287,8 +335,9 @@ class EstimatorNode(RwNode):
                 'deferred_samples': self.align.deferred,
                 'plant_restarts': self.align.restarts,
                 'switches': self.switches,
-                'encoders_order': self.sub_enc.summary(),
-                'command_order': self.sub_cmd.summary(),
+                'refused_resets': self.refused_resets,
+                'encoders_order': self.sub_enc.summary() if self.sub_enc is not None else 'in the loop',
+                'command_order': self.sub_cmd.summary() if self.sub_cmd is not None else 'in the loop',
             })
 
 

@@ -56,6 +56,18 @@ class LockedCallbacks:
         return super().add_post_set_parameters_callback(self._locked(callback))
 
 
+def estop_subscriptions(node, callback) -> list:
+    """The subscriptions of topic ``estop`` (std_msgs/Bool) of a plant-side node: one latched
+    (a publisher's last value reaches a node that starts later) and one that matches any
+    publisher (``ros2 topic pub /rwpend/estop std_msgs/msg/Bool "{data: true}"`` is volatile, which a
+    latched subscription never matches); a message seen by both is taken twice, which changes
+    nothing (the e-stop is a level, not an event)."""
+    from std_msgs.msg import Bool
+    from rwpend_ros.qos import QOS_ANY_PUBLISHER, QOS_LATCHED
+    return [node.create_subscription(Bool, 'estop', callback, QOS_LATCHED),
+            node.create_subscription(Bool, 'estop', callback, QOS_ANY_PUBLISHER)]
+
+
 class SlackTimer:
     """A periodic timer of a loop node whose work must not delay a sample (diagnostics: 0.35-0.6
     ms of CPU holding the GIL on the project's machine; PERFORMANCE.md, "Housekeeping"). While
@@ -74,6 +86,8 @@ class SlackTimer:
         self.due = False
         self.in_slack = 0        # runs in the loop's slack
         self.at_tick = 0         # runs at the tick (no loop running)
+        if getattr(node, 'hosted', False):
+            return               # a node of the loop's process: the loop runs fn (rwpend_loop.host)
         node.create_timer(period, self._tick)
 
     def _tick(self) -> None:

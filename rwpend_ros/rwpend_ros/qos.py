@@ -44,3 +44,9 @@ RECORDER_WINDOW_MAX = 80
 #: Latched state (e-stop): a late joiner gets the last value.
 QOS_LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: A subscription that matches every publisher, whatever its QoS: best effort and volatile
+#: (DDS matches a reader whose offers are no stronger than the writer's). With a QOS_LATCHED
+#: subscription beside it, the e-stop reaches the plant from any publisher a user types --
+#: ``ros2 topic pub`` with its defaults (volatile) included -- and a latched one is replayed.
+QOS_ANY_PUBLISHER = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST,
+                               depth=10, durability=DurabilityPolicy.VOLATILE)

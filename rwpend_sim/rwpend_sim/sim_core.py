@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Optional
 
 from rwpend_model.plant import Plant
 from rwpend_model.rig import Rig
@@ -184,4 +185,78 @@ class SimCore:
         self.plant.step(u)
         self.k += 1
         self.counters.samples += 1
+        return u
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The simulated plant at t_k (sim/true_state): angles, rates, the command held over
+    [t_k-1, t_k) and the seq it answered (-1: zero by timeout or e-stop)."""
+
+    theta: float
+    theta_dot: float
+    wheel_angle: float
+    wheel_rate: float
+    u_applied: float
+    torque: float
+    friction: float
+    disturbance: float
+    stuck: bool
+    timed_out: bool
+    command_seq: int
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What :meth:`SimHardware.read` gives for sample ``seq``."""
+
+    seq: int
+    pendulum_counts: int
+    motor_counts: int
+    #: the command held over [t_k-1, t_k), saturated: the u of the observers (3.5)/(7.1)
+    u_prev: float
+    truth: Optional[Truth] = None
+
+
+class SimHardware:
+    """The simulated rig (:class:`rwpend_sim.sim_core.SimCore`) as the loop's hardware.
+
+    ``read`` gives sample k; ``write`` offers the command answering it (the core's freshness
+    rule: refused when ``command_timeout_samples`` old, non-finite or for a future sample);
+    ``advance`` integrates [t_k, t_k+1) with the command held then (zero on timeout or e-stop)."""
+
+    def __init__(self, core: SimCore) -> None:
+        self.core = core
+        self.u_max = core.rig.u_max
+        self._u_prev = 0.0
+
+    @property
+    def k(self) -> int:
+        return self.core.k
+
+    def read(self) -> Reading:
+        core = self.core
+        seq, pc, mc = core.sample()
+        plant = core.plant
+        s = plant.state
+        truth = Truth(s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate, plant.u_held, s.torque,
+                      s.friction, plant.disturbance, bool(s.stuck), bool(core.timed_out), core.held_seq)
+        return Reading(seq, pc, mc, self._u_prev, truth)
+
+    def write(self, seq: int, u: float) -> tuple[bool, str]:
+        return self.core.command(seq, u)
+
+    @property
+    def timed_out(self) -> bool:
+        return self.core.timed_out
+
+    def no_command(self) -> None:
+        """Zero over the current interval whatever was held (a controller released the rig)."""
+        self.core.no_command()
+
+    def advance(self) -> float:
+        """Integrate the current interval; returns the command held over it."""
+        u = self.core.advance()
+        m = self.u_max
+        self._u_prev = m if u > m else (-m if u < -m else u)
         return u

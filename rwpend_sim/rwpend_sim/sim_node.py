@@ -38,14 +38,15 @@ from rwpend_ros import wire
 from rwpend_ros.claim import CommandClaim, format_id
 from rwpend_ros.diagnostics import publish_diagnostic
 from rwpend_ros.health import EXIT_LOOP_DEAD, SLOW_ADVICE, LoopHealth
-from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, local_subscription
+from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, estop_subscriptions, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS, RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN)
 from rwpend_ros.runner import run_node
 from rwpend_model.rig import format_differences, rig_differences
 from rwpend_ros.trace import tracer
-from rwpend_sim.sim_core import MAX_TAP, SimCore
+from rwpend_ros.gate import CommandGate
+from rwpend_sim.sim_core import MAX_TAP, Reading, SimCore, SimHardware
 
 RO = partial(ParamSpec, read_only=True)
 
@@ -108,8 +109,13 @@ PARAMS = [
 
 
 class SimNode(RwNode):
-    def __init__(self, bus=None) -> None:
-        """``bus``: the in-process bus of a composed process (rwpend_ros.intra), else None."""
+    def __init__(self, bus=None, hosted: bool = False, external_command: bool = True) -> None:
+        """``bus``: the in-process bus of a composed process (rwpend_ros.intra), or the loop
+        lock of the loop's process (rwpend_loop.host), else None. ``hosted``: the loop's process
+        runs the samples (no sample thread here; :meth:`publish_sample` is called after each
+        sample's command is written); ``external_command``: commands also come from the
+        ``command`` topic (a controller outside the loop)."""
+        self.hosted = bool(hosted)
         super().__init__('sim', bus=bus)
         self.param_table = ParameterTable(self)
         self.rig = declare_rig(self.param_table)   # the plant's physical truth
@@ -147,8 +153,10 @@ class SimNode(RwNode):
         # verdicts count such samples (the first-seconds check only judges real time)
         self.health = LoopHealth(p['lockstep_timeout'] if self.lockstep else self.h,
                                  dead_after_s=p['loop_dead_after'])
-        self.lock = threading.Condition()
+        #: the loop's lock: the host's (one for every node of the loop) or this node's own
+        self.lock = bus.lock if self.hosted else threading.Condition()
         self.stop = threading.Event()
+        self.hw = SimHardware(self.core)
         self.finished = False
 
         # to an estimator in this process first (real time: from the sample loop's thread,
@@ -165,14 +173,21 @@ class SimNode(RwNode):
         # also taken directly from a controller in this process (composed mode, rwpend_ros.intra),
         # after the command is written to DDS: an estimator of this process then has command k
         # (through DDS) before the sample k+1 this callback publishes in lockstep
-        self.sub_cmd = local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL,
-                                          before_dds=False, sender=wire.command_sender)
+        self.sub_cmd = (local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL,
+                                           before_dds=False, sender=wire.command_sender,
+                                           intra=not self.hosted)
+                        if external_command or not self.hosted else None)
         #: one controller at a time (rwpend_ros.claim)
         try:
             self.claim = CommandClaim(p['claim_timeout_samples'])
         except ValueError as exc:
             raise ConfigError(f'claim_timeout_samples {exc}') from exc
-        self.create_subscription(Bool, 'estop', self.on_estop_topic, QOS_LATCHED)
+        #: every command goes to the plant through the gate (claim, freshness, loop health)
+        self.gate = CommandGate(self.hw, self.claim, self.health)
+        estop_subscriptions(self, self.on_estop_topic)
+        #: the plant's e-stop as it is (latched): the controller and the console follow it
+        self.pub_estop_state = self.create_publisher(Bool, 'estop/state', QOS_LATCHED)
+        self.pub_estop_state.publish(Bool(data=False))
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
         # in the loop's slack: after a command is applied, not while a command waits (19.)
@@ -201,8 +216,10 @@ class SimNode(RwNode):
         self.steps = 0                  # samples integrated
         self.step_wall = time.monotonic()   # lockstep: wall time of the newest sample
         self.trace = tracer('sim')      # None unless RWPEND_TRACE is set (profiling)
-        self.thread = threading.Thread(target=self._run_loop, name='sim-loop', daemon=True)
-        self.thread.start()
+        self.thread = None
+        if not self.hosted:
+            self.thread = threading.Thread(target=self._run_loop, name='sim-loop', daemon=True)
+            self.thread.start()
         mode = 'lockstep' if self.lockstep else 'real time'
         self.get_logger().info(f'simulated rig: h = {self.h * 1e3:g} ms, {mode}, '
                                f'a = {self.rig.a:.3f}, b_p = {self.rig.b_p:.4f}, b_r = {self.rig.b_r:.2f}; '
@@ -228,16 +245,18 @@ class SimNode(RwNode):
         with self.lock:
             ok = self._offer(source, seq, u, release)
             if ok:
-                self._report(self.health.command())
+                self._report(self.gate.take_event())
             if ok and self.awaiting is not None and self.core.u_seq >= self.awaiting:
                 self._step()
+            if self.hosted:
+                self.lock.notify_all()       # a lockstep loop waiting for this command
         self.diag_timer.sample_done()
 
     def _offer(self, source: int, seq: int, u: float, release: bool) -> bool:
         """Lock held: the command (seq, u) of controller ``source`` to the plant, if that
         controller may drive the rig (rwpend_ros.claim); True when taken. A release puts the
         motor at zero now. A change of the claim is said at once (log, /diagnostics)."""
-        taken = self.claim.admit(source, self.core.k, lambda: self.core.command(seq, u)[0], release)
+        taken = self.gate.offer(source, seq, u, release)
         event = self.claim.event
         if event == 'refused':
             self.get_logger().warn(
@@ -245,8 +264,6 @@ class SimNode(RwNode):
                 f'{format_id(self.claim.holder)} (publishers of command: {self._command_publishers()})')
         elif event is not None:
             self.get_logger().info(f'rig {event} by controller {format_id(source)}')
-        if event == 'released':
-            self.core.no_command()
         if event is not None:
             self.publish_diagnostics()
         return taken
@@ -290,6 +307,7 @@ class SimNode(RwNode):
             changed = self.core.estop != on
             self.core.estop = on
             if changed:
+                self.pub_estop_state.publish(Bool(data=bool(on)))
                 # reported before any sample taken with the new state goes out (the lock holds
                 # the loop): in a bag the report comes first
                 self.publish_diagnostics()
@@ -325,27 +343,30 @@ class SimNode(RwNode):
         return resp
 
     # ------------------------------------------------------------ publishing
-    def publish_sample(self, stamp_ns: int) -> None:
-        """Sample core.k as wire bytes: encoders, then /clock (lockstep), then sim/true_state."""
-        seq, pc, mc = self.core.sample()
+    def publish_sample(self, stamp_ns: int, reading: Reading | None = None) -> bytes:
+        """Sample core.k (or ``reading``, taken by the loop) as wire bytes: encoders, then /clock
+        (lockstep), then sim/true_state; returns the encoders' bytes."""
+        r = self.hw.read() if reading is None else reading
+        seq = r.seq
         if self.trace is not None:
             self.trace('sim.pub', seq)
         sec, nsec = divmod(stamp_ns, 1_000_000_000)
         header = wire.pack_header(sec, nsec, self.frame_id)
-        self.pub_enc.publish(wire.pack_encoders(header, seq, pc, mc))
+        enc = wire.pack_encoders(header, seq, r.pendulum_counts, r.motor_counts)
+        self.pub_enc.publish(enc)
         if self.pub_clock is not None:
             # after the encoder sample: the sample is on the loop's critical path, /clock (three
             # readers) is not; a node may see sample k before its clock reads t_k (the controller's
             # state watchdog takes the stamp then, rwpend_control.safety)
             self.pub_clock.publish(wire.pack_clock(sec, nsec))
         if self.p['publish_true_state']:
-            plant = self.core.plant
-            s = plant.state
+            s = r.truth
             self.pub_true.publish(wire.pack_plant_state(
-                header, seq, self.core.held_seq, s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate,
-                plant.u_held, s.torque,
-                s.friction, plant.disturbance, bool(s.stuck), bool(self.core.timed_out)))
-        self.awaiting = seq
+                header, seq, s.command_seq, s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate,
+                s.u_applied, s.torque, s.friction, s.disturbance, s.stuck, s.timed_out))
+        if not self.hosted:
+            self.awaiting = seq
+        return enc
 
     def done(self) -> bool:
         d = self.p['duration']
@@ -507,8 +528,8 @@ class SimNode(RwNode):
         once when the command timeout starts, so the reason for u = 0 is reported when it
         happens (not up to a diagnostics period later), and when the loop's health changes."""
         was = self.core.timed_out
-        self.core.advance()
-        event = self.health.sample(late, self.core.timed_out)
+        self.gate.interval(late)
+        event = self.gate.take_event()
         if event is not None:
             self._report(event)
         elif self.core.timed_out and not was:
@@ -589,7 +610,7 @@ class SimNode(RwNode):
                 'recorder_hold_s': f'{self.recorder_hold_s:.3f}', 'recorder_given_up': self.recorder_given_up,
                 'malformed_progress': self.malformed_progress}
                if self.p['lockstep_recorder_window'] and self.lockstep else {}),
-            'command_order': self.sub_cmd.summary(),
+            'command_order': self.sub_cmd.summary() if self.sub_cmd is not None else 'in the loop',
             **self.claim.values(),
             'truth_vs_model': self.truth_differs or 'same',
             **self.health.values(),
@@ -602,7 +623,8 @@ class SimNode(RwNode):
         self.stop.set()
         with self.lock:
             self.lock.notify_all()
-        self.thread.join(timeout=2.0)
+        if self.thread is not None:
+            self.thread.join(timeout=2.0)
         try:
             self.publish_diagnostics()
         except Exception:  # noqa: BLE001 - context may be gone

@@ -1,0 +1,388 @@
+"""The loop's process: the plant, estimator and controller nodes hosted around one loop thread.
+
+    python -m rwpend_loop.host [sim] [estimator] [controller] [--record DIR] [--sim-time]
+                               --ros-args -r __ns:=/rwpend --params-file ...
+
+Like ros2_control's controller manager: the nodes ``sim``, ``estimator`` and ``controller`` are
+ROS nodes of this process with their names, parameters (validated, live through ``ros2
+param``), services and topics, and one thread runs the sample path through them as plain calls
+(:class:`rwpend_loop.loop.Loop`): read the encoders, estimate, control, offer the command to the
+gate, write it; then the nodes publish what the sample produced (``encoders``, ``sim/true_state``,
+``state``, ``joint_states``, ``command``, ``controller/status``) for observers. In real time a
+:class:`rwpend_loop.pacer.Pacer` runs it at absolute deadlines (SCHED_FIFO where permitted, from
+``RWPEND_RT_PRIORITY``); in lockstep (the simulator's ``lockstep`` parameter) a plain loop runs
+it as fast as the CPU goes, and the bag is the same every run.
+
+A node left out of the list runs elsewhere (another process or host): the loop then stops at
+the estimate (no controller here: ``state`` goes out, the command comes back on ``command``
+through the same gate, claimed) or at the encoders (no estimator either). In lockstep the loop
+waits for that command (the simulator's ``lockstep_timeout``, then u = 0, counted).
+
+``--record DIR``: the recorder of every topic runs in this process, as rosbag2's composable
+recorder does: what the hosted nodes publish goes into the bag as the bytes they published
+(no DDS hop, no second serialisation), ``/diagnostics`` included (so a lockstep bag is in a
+deterministic order: the nodes' reports come on the sample-time grid); every other topic
+(``/rosout``, ``/parameter_events``, ``estop`` ...) is subscribed over DDS as ``./rwpend record
+--all`` does. /diagnostics of processes outside this one are therefore not in the bag.
+``--sim-time``: log times on the simulated clock (lockstep).
+
+Every callback of a hosted node (parameters, services, timers) runs holding the loop's lock
+(:class:`LoopLock`), and so does each sample: a parameter change applies between two samples.
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+
+#: the hosted nodes, in the order they are built (the plant first: its gate serves the others)
+NODES = ('sim', 'estimator', 'controller')
+#: lockstep: the bag writer's queue length at which the loop waits for it (messages)
+RECORD_QUEUE_LIMIT = 20_000
+
+
+class LoopLock:
+    """The loop's lock, given to the hosted nodes in place of a bus
+    (:class:`rwpend_ros.nodes.LockedCallbacks`): their callbacks run holding it, and publishes go
+    straight to DDS. A condition on a re-entrant lock: the lockstep loop waits on it for an
+    external command."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Condition(threading.RLock())
+
+    def call(self, owner, callback, *args, **kwargs):
+        with self.lock:
+            return callback(*args, **kwargs)
+
+    def publish(self, topic: str, data, dds_publish) -> None:
+        dds_publish(data)
+
+    def local(self, topic: str) -> list:
+        return []
+
+    def after(self, fn) -> None:
+        fn()
+
+    def close(self) -> None:
+        pass
+
+
+class RecordingPublisher:
+    """A hosted node's publisher whose messages also go into the in-process bag: the same
+    bytes, at the time they were published (the writer gives the log time)."""
+
+    def __init__(self, pub, put) -> None:
+        self._pub = pub
+        self._put = put
+        self.topic = pub.topic_name
+
+    def publish(self, data) -> None:
+        self._pub.publish(data)
+        if isinstance(data, (bytes, bytearray)):
+            self._put(self.topic, bytes(data), time.time_ns())
+
+    def __getattr__(self, name):
+        return getattr(self._pub, name)
+
+
+class Host:
+    """The nodes of this process and the loop that runs through them."""
+
+    def __init__(self, names: list[str], record: str | None, sim_time: bool) -> None:
+        from rwpend_sim.sim_node import SimNode
+        from rwpend_loop.loop import ControllerStage, EstimatorStage, Loop
+        self.lock = LoopLock()
+        self.sim = SimNode(bus=self.lock, hosted=True, external_command='controller' not in names)
+        self.est = self.ctrl = None
+        if 'estimator' in names:
+            from rwpend_estimation.estimator_node import EstimatorNode
+            self.est = EstimatorNode(bus=self.lock, hosted=True)
+            self.est.stage = EstimatorStage(self.est.est)
+        if 'controller' in names:
+            from rwpend_control.controller_node import ControllerNode
+            self.ctrl = ControllerNode(bus=self.lock, hosted=True)
+        self.nodes = [n for n in (self.sim, self.est, self.ctrl) if n is not None]
+        self.recorder = None
+        if record:
+            from rwpend_bag.recorder_node import Recorder
+            self.recorder = Recorder(record, None, True, sim_time=sim_time, direct=self._tap())
+            self.nodes.append(self.recorder)
+        sim = self.sim
+        self.h = sim.h
+        self.period_ns = sim.period_ns
+        self.loop = Loop(sim.hw, sim.gate, self.est.stage if self.est else None,
+                         ControllerStage(self.ctrl.ctrl, self.ctrl.controller_id) if self.ctrl else None,
+                         self.h)
+        #: samples between two /diagnostics of each node (its diagnostics_period), and the
+        #: sample of each node's turn within it (spread: one node's report per sample at most)
+        self.diag_every = [(n, max(1, round(n.p['diagnostics_period'] / self.h)) if n is sim else
+                            max(1, round(float(n.get_parameter('diagnostics_period').value) / self.h))
+                            if n.has_parameter('diagnostics_period') else round(1.0 / self.h))
+                           for n in (sim, self.est, self.ctrl) if n is not None]
+        self.stop = threading.Event()
+        self.pacer = None
+        self.thread = threading.Thread(target=self._run, name='loop', daemon=True)
+
+    def _tap(self) -> dict:
+        """Wrap every sample-path and status publisher of the hosted nodes so that what they
+        publish is recorded as published; returns {topic: (type name, qos)} for the recorder."""
+        from rwpend_bag.recorder_node import qos_dict
+        topics = {}
+        for node, attrs in ((self.sim, ('pub_enc', 'pub_true', 'pub_clock', 'pub_diag')),
+                            (self.est, ('pub_state', 'pub_joints', 'pub_diag')),
+                            (self.ctrl, ('pub_cmd', 'pub_status', 'pub_diag'))):
+            if node is None:
+                continue
+            for attr in attrs:
+                pub = getattr(node, attr, None)
+                if pub is None:
+                    continue
+                inner = getattr(pub, 'pub', pub)          # a LocalPublisher's rclpy publisher
+                name = inner.topic_name
+                msg_type = inner.msg_type
+                type_name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
+                topics[name] = (type_name, [qos_dict(inner.qos_profile)])
+                setattr(node, attr, RecordingPublisher(inner, self._put))
+        return topics
+
+    def _put(self, topic: str, data: bytes, now_ns: int) -> None:
+        self.recorder.writer.put(topic, data, now_ns)
+        self.recorder.direct_received += 1
+
+    # ------------------------------------------------------------------ the loop thread
+    def _wait_for_start(self) -> None:
+        """Hold sample 0 until the parts outside this process are there: an external estimator
+        (a subscriber of encoders), in lockstep an external controller (a publisher of command
+        and a subscriber of state); then the simulator's ``start.delay``."""
+        sim = self.sim
+        enc_topic = sim.resolve_topic_name('encoders')
+        while not self.stop.is_set():
+            ok = True
+            if self.est is None:
+                ok = sim.count_subscribers(enc_topic) >= 1
+            if self.ctrl is None and sim.lockstep:   # (real time: the plant runs without one)
+                ok = ok and sim.count_publishers(sim.resolve_topic_name('command')) > 0
+                if self.est is not None:
+                    ok = ok and sim.count_subscribers(sim.resolve_topic_name('state')) >= 1
+            if ok:
+                break
+            time.sleep(0.02)
+        time.sleep(sim.p['start.delay'])
+        sim.wall_start = time.monotonic()
+
+    def _run(self) -> None:
+        try:
+            self._wait_for_start()
+            if self.sim.lockstep:
+                self._run_lockstep()
+            else:
+                self._run_realtime()
+        except Exception:  # noqa: BLE001 - the context may be gone at SIGINT
+            if self.sim.context.ok() and not self.stop.is_set():
+                raise
+        finally:
+            with self.lock.lock:
+                self.sim.finish()
+                self.finished = True
+
+    finished = False
+
+    def _sample(self, k: int, stamp_ns: int, behind=None) -> bool:
+        """Lock held: sample k through the loop, then published; False when the run is done."""
+        sim, loop = self.sim, self.loop
+        external = self.ctrl is None
+        if loop.interval_pending:
+            late = external and sim.core.u_seq < sim.core.k     # the command of the last sample did not come
+            was = sim.core.timed_out
+            loop.finish_interval(late=late)
+            self._after_interval(was)
+        if sim.done():
+            return False
+        was = sim.core.timed_out
+        tick = loop.step(behind=behind, t=stamp_ns * 1e-9)
+        if tick.late:
+            self._after_interval(was)
+        self._publish(tick, stamp_ns)
+        return True
+
+    def _after_interval(self, was_timed_out: bool) -> None:
+        sim = self.sim
+        event = sim.gate.take_event()
+        if event is not None:
+            sim._report(event)
+        elif sim.core.timed_out and not was_timed_out:
+            sim.publish_diagnostics()
+
+    def _publish(self, tick, stamp_ns: int) -> None:
+        """What sample k produced, for observers (after the command is written)."""
+        from rwpend_ros import wire
+        sim = self.sim
+        enc = sim.publish_sample(stamp_ns, tick.reading)
+        sim.steps += 1
+        if self.est is not None:
+            self._publish_loop_nodes(tick, stamp_ns, enc)
+        seq = tick.reading.seq
+        for i, (node, every) in enumerate(self.diag_every):
+            if seq % every == (every - 1 - i) % every:     # on the sample time grid: deterministic
+                node.publish_diagnostics()
+
+    def _publish_loop_nodes(self, tick, stamp_ns: int, enc: bytes) -> None:
+        from rwpend_ros import wire
+        sim = self.sim
+        for node in (self.est, self.ctrl):
+            if node is not None and node.sample_time is not None:
+                node.sample_time(enc)
+        if tick.reading.seq > 0:
+            self.est.note_command(tick.reading.seq - 1, tick.reading.u_prev)
+        e = tick.estimate
+        if e is None:
+            return
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        header = wire.pack_header(sec, nanosec, sim.frame_id)
+        self.est.publish_estimate(header, tick.reading.seq, e)
+        if self.ctrl is not None and tick.status is not None:
+            self.ctrl.publish_result(header, tick.reading.seq, tick.u if tick.u is not None else 0.0,
+                                     tick.status, sec, nanosec)
+
+    def _run_realtime(self) -> None:
+        from rwpend_loop.pacer import Pacer
+        self.pacer = pacer = Pacer(self.period_ns)
+        t0_ros = self.sim.get_clock().now().nanoseconds
+        period = self.period_ns
+
+        def tick(k: int) -> bool:
+            with self.lock.lock:
+                return self._sample(k, t0_ros + k * period, behind=pacer.behind)
+        pacer.run(tick, self.stop)
+        self.sim.overruns = pacer.overruns
+
+    def _run_lockstep(self) -> None:
+        sim = self.sim
+        period = self.period_ns
+        external = self.ctrl is None and self.est is not None
+        writer = self.recorder.writer if self.recorder is not None else None
+        k = 0
+        cond = self.lock.lock
+        while not self.stop.is_set():
+            with cond:
+                if not self._sample(k, k * period):
+                    break
+                if external:
+                    self._await_command(k)
+            if writer is not None and writer.queue_size() > RECORD_QUEUE_LIMIT:
+                while writer.queue_size() > RECORD_QUEUE_LIMIT // 2 and not self.stop.is_set():
+                    time.sleep(0.001)        # the bag writer catches up: nothing is lost
+            k += 1
+
+    def _await_command(self, k: int) -> None:
+        """Lockstep, lock held: wait for the external controller's command answering k
+        (``lockstep_timeout`` of wall time; sample 0 ``start.first_command_timeout``)."""
+        sim = self.sim
+        limit = sim.p['lockstep_timeout'] if k else sim.p['start.first_command_timeout']
+        deadline = time.monotonic() + limit
+        while sim.core.u_seq < k and not self.stop.is_set():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                if k == 0:
+                    sim.get_logger().warn(f'lockstep: no command for sample 0 within {limit:g} s; '
+                                          'running with u = 0')
+                sim.core.counters.late_commands += 1
+                sim.core.no_command()
+                was = sim.core.timed_out
+                self.loop.finish_interval(late=True)
+                self._after_interval(was)
+                return
+            self.lock.lock.wait(remaining)
+
+    # ------------------------------------------------------------------ life
+    def start(self) -> None:
+        self.thread.start()
+
+    def close(self) -> None:
+        self.stop.set()
+        with self.lock.lock:
+            self.lock.lock.notify_all()
+        if self.thread.is_alive():
+            self.thread.join(timeout=2.0)
+
+
+def parse_args(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
+    ros = []
+    if '--ros-args' in argv:
+        i = argv.index('--ros-args')
+        argv, ros = argv[:i], argv[i:]
+    p = argparse.ArgumentParser(prog='rwpend_loop.host', description=__doc__.split('\n\n')[0])
+    p.add_argument('nodes', nargs='*', default=list(NODES), help='the hosted nodes (sim first)')
+    p.add_argument('--record', metavar='DIR', help='record every topic into the bag DIR, in this process')
+    p.add_argument('--sim-time', action='store_true', help='log times on the simulated clock (lockstep)')
+    a = p.parse_args(argv)
+    bad = [n for n in a.nodes if n not in NODES]
+    if bad or len(set(a.nodes)) != len(a.nodes) or 'sim' not in a.nodes:
+        p.error(f'nodes must be distinct names of {", ".join(NODES)} with sim, got {" ".join(a.nodes)}')
+    if 'controller' in a.nodes and 'estimator' not in a.nodes:
+        p.error('a hosted controller needs the hosted estimator (the loop runs estimator -> controller)')
+    return a, ros
+
+
+def main(argv=None) -> int:
+    """Build the nodes, run the executor in this thread and the loop in its own until SIGINT /
+    SIGTERM or the simulator's ``duration``; returns the exit status (2: a bad parameter, 3: the
+    loop was dead at the end)."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
+
+    from rwpend_ros.params import ConfigError
+    from rwpend_ros.runner import freeze_gc, make_executor, spin_executor
+    from rwpend_ros.sched import apply_scheduling
+    from rwpend_ros.transport import apply_transport_or_exit
+    a, ros = parse_args(sys.argv[1:] if argv is None else list(argv))
+    apply_transport_or_exit()
+    apply_scheduling()
+    # the loop thread must get the GIL within a fraction of a sample when it wakes
+    sys.setswitchinterval(0.0002)
+    rclpy.init(args=[sys.argv[0], *ros], signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    host = None
+    status = 0
+    try:
+        host = Host(a.nodes, a.record, a.sim_time)
+        executor = make_executor()
+        for node in host.nodes:
+            executor.add_node(node)
+        freeze_gc()
+        host.start()
+        spin_executor(executor, until=lambda: stop.is_set() or host.finished)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ConfigError as exc:
+        print(f'error: {exc}', file=sys.stderr, flush=True)
+        status = 2
+    finally:
+        if host is not None:
+            host.close()
+            for node in reversed(host.nodes):
+                close = getattr(node, 'close', None)
+                if callable(close):
+                    try:
+                        close()
+                    except Exception as exc:  # noqa: BLE001 - report, keep shutting down
+                        print(f'error while closing {node.get_name()}: {exc}', file=sys.stderr, flush=True)
+            for node in host.nodes:
+                try:
+                    node.destroy_node()
+                except Exception:  # noqa: BLE001
+                    pass
+        rclpy.try_shutdown()
+        for sig, h in old.items():
+            signal.signal(sig, h)
+    if status == 0 and host is not None:
+        status = host.sim.exit_status()
+    return status
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
