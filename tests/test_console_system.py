@@ -4,7 +4,15 @@ Selenium through the system's chromedriver; ``make test`` installs both).
 * lockstep with ``up --console``: the run starts when the page is open, the plots show the
   swing-up (the page's own data), a valid gain edit reaches the controller (read back with the
   param tool), an unstable gain shows the controller's refusal and the field its value again, a
-  design preview shows the gains it gives; the screenshot is kept in console_out/console.png;
+  design preview shows the gains it gives; the fields show their whole values and their ranges
+  in 6 significant digits, the script writes numbers as rwpend_console.fmt does, the lights show
+  their reasons, the ``law`` mode button is offered (the controller has a law.file); the
+  screenshot is kept in console_out/console.png;
+* real time, the console a process of its own: the e-stop shown is the rig's -- raised and
+  cleared elsewhere (``./rwpend estop [--clear]``: the plant's ``~/estop`` service), raised from
+  the page and cleared elsewhere --, the ``u`` plot has the applied command (exactly 0 under the
+  e-stop while the controller sends its swing-up), the ``law`` button is not offered (no
+  law.file) and says why, and a console that went away is said as such;
 * real time with a recorder: the e-stop button, pressed while the page has a queue of slow
   requests, stops the motor within 100 ms -- judged from the bag: the console's record of the
   press on /diagnostics carries the page's clock at the click as its stamp, and the first
@@ -117,7 +125,10 @@ def log_text(path) -> str:
 def test_page_shows_the_swing_up_and_tunes_the_gains(browser, ros_env, tmp_path):
     port = free_port()
     log = open(tmp_path / 'up.log', 'w')
-    up = start(['up', '--lockstep', '--duration', '600', '--mode', 'auto', '--console', str(port)], ros_env, log)
+    law = tmp_path / 'zero_law.py'           # a law of one's own: mode law is offered
+    law.write_text('def control(state, params):\n    return 0.0\n')
+    up = start(['up', '--lockstep', '--duration', '600', '--mode', 'auto', '--console', str(port),
+                '--set', f'controller.law.file={law}'], ros_env, log)
     rig = f'{ros_env["ROS_DOMAIN_ID"]}:/rwpend'
     try:
         wait_for(lambda: f'127.0.0.1:{port}' in log_text(tmp_path / 'up.log'), 120, 'the console to start')
@@ -137,6 +148,12 @@ def test_page_shows_the_swing_up_and_tunes_the_gains(browser, ros_env, tmp_path)
         browser.save_screenshot(str(OUT / 'console.png'))
         # then tuned from the page while it balances
         gains_are_tuned_from_the_page(browser, ros_env)
+        fields_show_whole_values_and_readable_ranges(browser)
+        numbers_are_written_as_the_console_writes_them(browser)
+        lights_show_their_reasons(browser)
+        wait_for(lambda: page_data(browser, "document.querySelector('.mode-btn[data-mode=law]').dataset.usable")
+                 == 'true', 60, 'the law button offered (the controller has a law.file)')
+        assert str(law) in browser.find_element('css selector', '.mode-btn[data-mode="law"]').get_attribute('title')
         stats = page_data(browser, 'rwpendStats')
         assert stats['frames'] > 10
         print(f"page: {stats['fps']} frames/s, {stats['samples']} samples, latency kind {stats['latency_kind']}")
@@ -192,6 +209,132 @@ def gains_are_tuned_from_the_page(d, env):
     now = param_get(env, 'balance.kpp', 'balance.design.omega0')
     assert float(now['balance.kpp']) == -300.0, 'the refused value did not take'
     assert now['balance.design.omega0'] == '1.5wp', 'a preview sets nothing'
+
+
+def fields_show_whole_values_and_readable_ranges(d):
+    """Every editable number field shows its whole value inside the field (it used to cut long
+    numbers), and no range carries a raw float's tail (it printed '1 .. 183.72549019607843')."""
+    from selenium.webdriver.common.by import By
+    rows = d.execute_script(
+        "return [...document.querySelectorAll('#fields input[type=text]')].map(i => "
+        "[i.dataset.param, i.value, i.scrollWidth, i.clientWidth, "
+        "i.closest('tr').querySelector('.range').textContent]);")
+    assert rows, 'the gains panel'
+    for name, value, scroll_w, client_w, range_text in rows:
+        assert scroll_w <= client_w, f'{name}: {value!r} is cut ({scroll_w} > {client_w} px)'
+        for word in range_text.replace(';', ' ').split():
+            digits = word.split('e')[0].lstrip('-').replace('.', '').lstrip('0')
+            assert not digits.isdigit() or len(digits) <= 7, f'{name}: range {range_text!r}'
+    field(d, 'balance.kpp')     # the panel is the controller's
+    limit = d.find_element(By.CSS_SELECTOR, 'input[data-param="wheel_speed_limit"]').find_element(
+        By.XPATH, './ancestor::tr').find_element(By.CSS_SELECTOR, '.range').text
+    assert limit.startswith('≥ 1 and < ') and len(limit) < 24, limit
+
+
+def numbers_are_written_as_the_console_writes_them(d):
+    """The page's script (live readouts, plot axes, previews) and rwpend_console.fmt write the
+    same text for the same number: the EXAMPLES of fmt, run in Chromium."""
+    from rwpend_console.fmt import EXAMPLES, SIGNAL_EXAMPLES
+    got = d.execute_script('return arguments[0].map(([v, n]) => rwpendFormat.number(v, n));',
+                           [[v, n] for v, n, _ in EXAMPLES])
+    assert got == [t for _, _, t in EXAMPLES]
+    got = d.execute_script('return arguments[0].map((v) => rwpendFormat.signal(v));', [v for v, _ in SIGNAL_EXAMPLES])
+    assert got == [t for _, t in SIGNAL_EXAMPLES]
+
+
+def lights_show_their_reasons(d):
+    """Each light's reason is on the page, beside it (it used to be only in the tooltip)."""
+    lights = d.execute_script(
+        "return [...document.querySelectorAll('#lights .light')].map(l => [l.dataset.key, "
+        "l.querySelector('.why').textContent, l.querySelector('.why').getBoundingClientRect().width]);")
+    keys = {k for k, _, _ in lights}
+    assert {'late', 'timeouts', 'faults', 'estop', 'node:sim', 'node:controller'} <= keys, keys
+    for key, why, width in lights:
+        assert why and width > 0, f'light {key}: no reason shown ({why!r})'
+
+
+# ------------------------------------------------------------------ real time: the e-stop state
+def estop_shown(d):
+    return d.execute_script("const b = document.getElementById('estop'); return [b.dataset.state, "
+                            "document.getElementById('estop-state').textContent];")
+
+
+def estop_light(d):
+    return d.execute_script("const l = document.querySelector('.light[data-key=estop]'); "
+                            "return [l.dataset.level, l.querySelector('.why').textContent];")
+
+
+def run_tool(env, *args):
+    p = subprocess.run([RWPEND, *args], env=env, capture_output=True, text=True, timeout=180)
+    assert p.returncode == 0, p.stdout + p.stderr
+    return p.stdout
+
+
+#: the page's u and applied rows newer than a sample time (its own data)
+ROWS_AFTER = 'return [rwpendPage.u.filter(r => r[0] > arguments[0]), rwpendPage.applied.filter(r => r[0] > arguments[0])];'
+
+
+@pytest.mark.timeout(1200)
+def test_estop_state_is_the_rigs_and_the_applied_command_is_plotted(browser, ros_env, tmp_path):
+    from selenium.webdriver.common.by import By
+    port = free_port()
+    log = open(tmp_path / 'stack.log', 'w')
+    up = start(['up', '--mode', 'auto', '--duration', '900'], ros_env, log)
+    console = start(['console', '--port', str(port), '--no-bridge'], ros_env, log)
+    rig = f'{ros_env["ROS_DOMAIN_ID"]}:/rwpend'
+    try:
+        wait_for(lambda: f'127.0.0.1:{port}' in log_text(tmp_path / 'stack.log'), 120, 'the console to start')
+        browser.get(f'http://127.0.0.1:{port}/?rig={rig}')
+        wait_for(lambda: page_data(browser, 'rwpendPage.applied.length') > 20, 180, 'the applied command on the page')
+        wait_for(lambda: estop_shown(browser)[0] == 'clear', 60, 'the e-stop shown clear (the plant reports)')
+        # mode law: not offered without a law file, and the page says why and what to do
+        wait_for(lambda: browser.find_element(By.CSS_SELECTOR, '.mode-btn[data-mode="law"]').get_attribute('disabled'),
+                 60, 'the law button not offered')
+        note = browser.find_element(By.ID, 'mode-note').text
+        assert 'law.file' in note and '--set controller.law.file=' in note, note
+
+        # raised elsewhere (the plant's ~/estop service), shown raised; the motor at zero on the plot
+        run_tool(ros_env, 'estop')
+        wait_for(lambda: estop_shown(browser)[0] == 'raised', 60, 'the e-stop shown raised (raised elsewhere)')
+        assert 'elsewhere' in estop_shown(browser)[1], estop_shown(browser)
+        assert browser.find_element(By.ID, 'estop').text == 'E-STOP RAISED'
+        t_raised = page_data(browser, 'rwpendPage.newest')
+        # the controller goes on sending its swing-up while the plant holds the motor at zero
+        wait_for(lambda: len(browser.execute_script(ROWS_AFTER, t_raised + 0.5)[1]) >= 50, 120,
+                 '1 s of applied command under the e-stop')
+        u, applied = browser.execute_script(ROWS_AFTER, t_raised + 0.5)
+        assert all(r[1] == 0 for r in applied), [r for r in applied if r[1] != 0][:5]
+        assert max(abs(r[1]) for r in u) > 0.5, 'the controller sent torque meanwhile: the two traces differ'
+        wait_for(lambda: browser.find_element(By.ID, 'readout-applied').text == '0', 30, 'the applied readout: 0')
+        level, why = estop_light(browser)     # (the lights are drawn anew every status: read at once)
+        assert level == 'error' and 'held at zero' in why, (level, why)
+
+        # cleared elsewhere: shown clear
+        run_tool(ros_env, 'estop', '--clear')
+        wait_for(lambda: estop_shown(browser)[0] == 'clear', 60, 'the e-stop shown clear (cleared elsewhere)')
+        assert 'cleared elsewhere' in estop_shown(browser)[1], estop_shown(browser)
+
+        # the student's case: raised from the page, cleared elsewhere -> the button follows the rig
+        browser.find_element(By.ID, 'estop').click()
+        wait_for(lambda: estop_shown(browser)[0] == 'raised', 60, 'the e-stop shown raised (from the page)')
+        assert 'from this console' in estop_shown(browser)[1], estop_shown(browser)
+        run_tool(ros_env, 'estop', '--clear')
+        wait_for(lambda: estop_shown(browser)[0] == 'clear', 60, 'the e-stop shown clear after a clear elsewhere')
+        assert 'cleared elsewhere' in estop_shown(browser)[1], estop_shown(browser)
+        assert 'raised' not in browser.find_element(By.ID, 'estop').get_attribute('class')
+
+        # the console goes away: the page says it lost the console, never "Failed to fetch"
+        stop(console)
+        wait_for(lambda: 'lost the console' in browser.find_element(By.ID, 'conn').text, 60, 'the page: console lost')
+        assert estop_shown(browser)[0] == 'unknown', estop_shown(browser)
+        browser.find_element(By.CSS_SELECTOR, '.mode-btn[data-mode="off"]').click()
+        wait_for(lambda: browser.find_element(By.ID, 'mode-msg').text, 60, 'the answer to a mode request')
+        msg = browser.find_element(By.ID, 'mode-msg').text
+        assert 'lost the console' in msg and 'Failed to fetch' not in msg and 'TypeError' not in msg, msg
+    finally:
+        stop(console)
+        stop(up)
+        log.close()
 
 
 # ------------------------------------------------------------------ real time: the e-stop

@@ -15,8 +15,10 @@ from typing import Any
 from rwpend_control.supervisor import MODES
 
 from . import bags, paramsvc
+from .fmt import value_text
 from .jobs import Analyses, Recording
 from .labruns import LabRuns
+from .modes import mode_buttons
 from .panel import coerce_value, design_preview
 from .rigs import node_name, parse_rig_id, rig_id
 from .rosside import CallError, DomainWatcher
@@ -97,8 +99,21 @@ class ConsoleApp:
         w, ns, rid = self.rig(rig)
         rec = self.recordings.get(rid)
         return {'id': rid, 'domain': w.domain, 'ns': ns, 'nodes': w.node_names(ns), 'lights': w.lights(ns),
-                'summary': w.summary(ns), 'recording': rec.as_dict() if rec is not None else None,
+                'summary': w.summary(ns), 'estop': w.estop_state(ns),
+                'recording': rec.as_dict() if rec is not None else None,
                 'analyses': self.analyses.state()}
+
+    def modes(self, rig: Any) -> dict:
+        """The mode buttons of the rig's controller: mode ``law`` is usable only with a
+        ``law.file`` (read from the controller; when it cannot be read the controller decides)."""
+        w, ns, _ = self.rig(rig)
+        fqn = self._node(ns, 'controller')
+        try:
+            got = paramsvc.get_typed(w.call, fqn, ['law.file'])
+            law_file, why = (str(got['law.file'][1]) if 'law.file' in got else ''), ''
+        except CallError as exc:
+            law_file, why = None, str(exc)
+        return {'node': fqn, 'law_file': law_file, 'modes': mode_buttons(MODES, law_file, why)}
 
     def params(self, rig: Any, node: Any) -> dict:
         w, ns, _ = self.rig(rig)
@@ -197,10 +212,11 @@ class ConsoleApp:
         try:
             value = coerce_value(fields[0], body['value'])
         except ValueError as exc:
-            return {'ok': False, 'reason': str(exc), 'value': fields[0].value}
+            return {'ok': False, 'reason': str(exc), 'value': fields[0].value,
+                    'value_text': value_text(fields[0].type, fields[0].value)}
         (_, ok, reason), = self._call(paramsvc.set_values, w.call, fqn, {name: value})
-        now = self._call(paramsvc.get_typed, w.call, fqn, [name]).get(name, (None, None))[1]
-        return {'ok': ok, 'reason': reason if not ok else '', 'value': now}
+        type_name, now = self._call(paramsvc.get_typed, w.call, fqn, [name]).get(name, (fields[0].type, None))
+        return {'ok': ok, 'reason': reason if not ok else '', 'value': now, 'value_text': value_text(type_name, now)}
 
     def mode(self, body: Any) -> dict:
         from rwpend_msgs.srv import SetMode
@@ -221,7 +237,8 @@ class ConsoleApp:
 
     def estop(self, body: Any, on: bool = True) -> dict:
         """The e-stop: the rig's latched topic at once, then each plant's ``estop`` service for
-        its answer. ``clicked_ms`` (the page's clock at the click) stamps the console's record."""
+        its answer. ``clicked_ms`` (the page's clock at the click) stamps the console's record.
+        ``estop``: the rig's e-stop as its plant reported it after the answers."""
         from std_srvs.srv import SetBool
         w, ns, _ = self.rig(_get(body, 'rig', str, 'the rig'))
         clicked = body.get('clicked_ms')
@@ -235,7 +252,8 @@ class ConsoleApp:
                 answers.append({'service': name, 'ok': bool(r.success), 'message': r.message})
             except CallError as exc:
                 answers.append({'service': name, 'ok': False, 'message': str(exc)})
-        return {'ok': True, 'on': on, 'topic': f'{ns.rstrip("/")}/estop', 'answers': answers}
+        return {'ok': True, 'on': on, 'topic': f'{ns.rstrip("/")}/estop', 'answers': answers,
+                'estop': w.estop_state(ns)}
 
     def record(self, body: Any) -> dict:
         w, ns, rid = self.rig(_get(body, 'rig', str, 'the rig'))

@@ -6,11 +6,15 @@ The console's node adds rows as decimated samples come (:meth:`Feed.add_state`,
 sample time first. Rows are compact lists (the page's JSON):
 
 * ``s``: ``[t, theta, theta_dot, wheel_rate, energy, recv_ms]`` from ``state``;
-* ``u``: ``[t, u, saturated]`` from ``controller/status``;
+* ``u``: ``[t, u, saturated]`` from ``controller/status``: what the controller sends;
+* ``a``: ``[t, u_applied]``: what the motor got -- ``u_applied`` of ``sim/true_state`` on the
+  simulator, ``u`` of ``applied`` on the rig (zero while the e-stop or the command timeout holds
+  the motor, whatever the controller sends);
 * ``b``: ``[t, mode, law]`` whenever the mode or the law changes (never decimated away: the
   bands on the plots start there).
 
 ``t`` is the sample's stamp in seconds (sim time in lockstep, the wall clock in real time),
+u and the applied command with |u| < 1e-9 as exactly 0 (:func:`rwpend_console.fmt.clean_signal`);
 ``recv_ms`` the console's wall clock when it took the sample (ms since the epoch): the page
 measures its latency from them. Stamps that go back by more than a second start a new
 ``generation`` (a new run): the rows of the old one are dropped and pages start afresh.
@@ -21,6 +25,7 @@ import threading
 from collections import deque
 
 from .decimate import RESTART_NS
+from .fmt import clean_signal
 
 
 class Feed:
@@ -62,18 +67,24 @@ class Feed:
                 self._last_band = (mode, law)
                 self._add('b', [t, mode, law])
             if keep_u:
-                self._add('u', [t, u, bool(saturated)])
+                self._add('u', [t, clean_signal(u), bool(saturated)])
+
+    def add_applied(self, stamp_ns: int, u: float) -> None:
+        """The command the motor was driven with over the sample stamped ``stamp_ns``."""
+        with self._lock:
+            self._stamp(stamp_ns)
+            self._add('a', [stamp_ns / 1e9, clean_signal(u)])
 
     def since(self, cursor: int | None, window_s: float, generation: int | None = None) -> tuple[dict, int]:
         """Rows newer than ``cursor`` (None, or another ``generation``: the last ``window_s`` of
-        sample time, with the band in force at its start) -> ({'gen', 'reset', 's', 'u', 'b'},
+        sample time, with the band in force at its start) -> ({'gen', 'reset', 's', 'u', 'a', 'b'},
         new cursor)."""
         with self._lock:
             reset = cursor is None or generation != self.generation
             rows = list(self._rows) if reset else self._newer(cursor)
             new_cursor = self._rows[-1][0] if self._rows else (0 if reset else cursor)
             gen = self.generation
-        out: dict = {'gen': gen, 'reset': reset, 's': [], 'u': [], 'b': []}
+        out: dict = {'gen': gen, 'reset': reset, 's': [], 'u': [], 'a': [], 'b': []}
         if reset and rows:
             t_end = max(r[2][0] for r in rows)
             start = t_end - window_s

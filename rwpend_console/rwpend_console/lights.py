@@ -8,13 +8,19 @@ time it came, and gives per rig:
 * a light per node (its level and message; ``stale`` when nothing came for
   :data:`STALE_AFTER_S`);
 * four lights the lab asks about first: late samples (the plant's share of late commands),
-  timeouts (the command timeout: the motor held at zero), faults (the controller's), e-stop;
+  timeouts (the command timeout: the motor held at zero), faults (the controller's), e-stop
+  (the plant's state, :mod:`rwpend_console.estop`: also :meth:`StatusBoard.estop`);
 * a summary row for the lab's overview (mode, law, worst level, e-stop).
+
+Every light has its reason in ``message`` (the page shows it beside the light) and the facts
+behind it in ``facts``.
 """
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping
+
+from .estop import EstopState, EstopTracker
 
 #: seconds without a status before a node's light goes stale (nodes report every second)
 STALE_AFTER_S = 3.0
@@ -73,9 +79,22 @@ class StatusBoard:
     def __init__(self) -> None:
         #: name -> (receive time s, level number, message, values)
         self.statuses: dict[str, tuple[float, int, str, dict]] = {}
+        #: rig -> its plants' e-stop reports and this console's requests
+        self.estops: dict[str, EstopTracker] = {}
 
     def update(self, name: str, level: int, message: str, values: Mapping[str, str], now: float) -> None:
         self.statuses[name] = (now, level, message, dict(values))
+        ns, node = split_status_name(name)
+        if node in PLANT_NODES:
+            self.estops.setdefault(ns, EstopTracker()).report(node, values.get('estop'), now)
+
+    def estop_requested(self, rig: str, on: bool, now: float) -> None:
+        """This console sends a raise (``on``) or a clear of the e-stop of ``rig``."""
+        self.estops.setdefault(rig, EstopTracker()).requested(on, now)
+
+    def estop(self, rig: str, now: float) -> EstopState:
+        """The e-stop of ``rig`` as its plant last reported it (:mod:`rwpend_console.estop`)."""
+        return self.estops.get(rig, EstopTracker()).state(now, STALE_AFTER_S)
 
     def rigs(self) -> list[str]:
         return sorted({split_status_name(n)[0] for n in self.statuses})
@@ -98,7 +117,7 @@ class StatusBoard:
         nodes = self.nodes(rig, now)
         plant = next((nodes[n] for n in PLANT_NODES if n in nodes), None)
         out = [_late_light(plant), _timeout_light(plant), _fault_light(nodes.get('controller')),
-               _estop_light(plant)]
+               _estop_light(self.estop(rig, now))]
         for node, (level, msg, values) in nodes.items():
             out.append(Light(f'node:{node}', node, level, msg,
                              {k: values[k] for k in FACTS if k in values}))
@@ -111,7 +130,7 @@ class StatusBoard:
         plant = next((nodes[n] for n in PLANT_NODES if n in nodes), None)
         return {'ns': rig, 'mode': ctrl.get('mode', ''), 'law': ctrl.get('law', ''),
                 'level': _worst(x.level for x in self.lights(rig, now)) if nodes else 'stale',
-                'estop': plant is not None and plant[2].get('estop') == 'True',
+                'estop': self.estop(rig, now).state == 'raised',
                 'plant': next((n for n in PLANT_NODES if n in nodes), ''),
                 'nodes': sorted(nodes)}
 
@@ -147,9 +166,10 @@ def _fault_light(ctrl) -> Light:
     return Light('faults', 'faults', level, msg if level != 'ok' else 'no fault')
 
 
-def _estop_light(plant) -> Light:
-    if plant is None or plant[0] == 'stale':
-        return Light('estop', 'e-stop', 'stale', 'no plant reports')
-    on = plant[2].get('estop') == 'True'
-    return Light('estop', 'e-stop', 'error' if on else 'ok',
-                 'E-STOP latched: motor at zero' if on else 'clear')
+def _estop_light(st: EstopState) -> Light:
+    level = {'raised': 'error', 'clear': 'ok'}.get(st.state, 'stale')
+    if st.unconfirmed:
+        level = 'error'
+    elif st.pending:
+        level = 'warn'
+    return Light('estop', 'e-stop', level, st.text)

@@ -12,7 +12,12 @@ descriptions. The console's node turns rcl_interfaces messages into the plain di
   them: :func:`rwpend_ros.paramspec.check` on :func:`spec_of` the field) before anything is
   sent: a clear reason, nothing sent, otherwise;
 * :func:`design_preview` -- the gains a design would give, and whether the linearized upright
-  loop (model 4.8) is stable with them, before the design is applied.
+  loop (model 4.8) is stable with them, before the design is applied;
+* :func:`range_text`, :func:`notes_text` -- what a field takes, written for a reader: its range
+  with the open ends its constraints state (``≥ 1 and < 183.725``), bounds in 6 significant
+  digits (:func:`rwpend_console.fmt.number_text`, as the node writes them when it refuses a
+  value), and the constraints that are not bounds; a field's value is shown whole
+  (:func:`rwpend_console.fmt.value_text`).
 """
 from __future__ import annotations
 
@@ -20,6 +25,8 @@ import math
 import re
 from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping
+
+from .fmt import number_text, value_text
 
 #: rcl_interfaces/ParameterType numbers -> the names used here (and on the page)
 TYPE_NAMES = {0: 'not_set', 1: 'bool', 2: 'integer', 3: 'double', 4: 'string', 5: 'byte_array',
@@ -47,7 +54,10 @@ class Field:
     designs: str = ''               # the gain group this design parameter designs
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The field for the page: its data, and the texts the page shows (``value_text``: the
+        whole value, ``range_text``, ``notes``)."""
+        return {**asdict(self), 'value_text': value_text(self.type, self.value),
+                'range_text': range_text(self), 'notes': notes_text(self)}
 
 
 def _range(descr: Mapping) -> tuple[float | None, float | None, float | None]:
@@ -153,6 +163,46 @@ def spec_of(f: Field):
     return ParamSpec(f.name, None, f.description, low=low, high=high, low_open=low_open, high_open=high_open,
                      step=step, choices=choices if f.type == 'string' else (), read_only=f.read_only,
                      kind=f.type if f.type in KINDS else 'string')
+
+
+def _bound_text(v: float, integer: bool) -> str:
+    return number_text(int(v) if integer and float(v).is_integer() else float(v))
+
+
+def range_text(f: Field) -> str:
+    """The values a number field takes, as the page shows them: ``-10 .. 0`` (both bounds, both
+    closed), ``≥ 1 and < 183.725`` (an open end), ``> 0`` / ``≤ 5`` (one bound), with ``, step
+    N`` for an integer range whose step is not 1; '' for a field that is not a number or has no
+    bounds. What the descriptor states: the range and the bounds of its constraints
+    (:func:`spec_of`)."""
+    if f.type not in ('double', 'integer'):
+        return ''
+    spec = spec_of(f)
+    integer = f.type == 'integer'
+    lo = None if spec.low is None else _bound_text(spec.low, integer)
+    hi = None if spec.high is None else _bound_text(spec.high, integer)
+    low_op = '>' if spec.low_open else '≥'
+    high_op = '<' if spec.high_open else '≤'
+    if lo is not None and hi is not None:
+        text = f'{lo} .. {hi}' if not (spec.low_open or spec.high_open) else f'{low_op} {lo} and {high_op} {hi}'
+    elif lo is not None:
+        text = f'{low_op} {lo}'
+    elif hi is not None:
+        text = f'{high_op} {hi}'
+    else:
+        return ''
+    if spec.step and spec.step != 1:
+        text += f', step {spec.step}'
+    return text
+
+
+def notes_text(f: Field) -> str:
+    """The field's constraints that are not bounds (those are in :func:`range_text`): the
+    allowed values ('one of: a, b'), what the node judges itself ('closed loop (4.8) stable')."""
+    parts = [p.strip() for p in (f.constraints or '').split('; ') if p.strip()]
+    if f.type in ('double', 'integer'):
+        parts = [p for p in parts if not _BOUND.fullmatch(p)]
+    return '; '.join(parts)
 
 
 def coerce_value(f: Field, raw: Any) -> Any:

@@ -7,13 +7,20 @@ Topics (per rig, relative to its namespace):
 | ``/diagnostics`` | DiagnosticArray | reliable, depth 100 | always (the lights, the overview) |
 | ``state`` | StateEstimate (raw) | best effort, depth 1 | while a page watches the rig |
 | ``controller/status`` | ControllerStatus | reliable, depth 10 | while a page watches the rig |
+| ``sim/true_state`` | PlantState (raw) | best effort, depth 1 | while a page watches the rig,
+  from its first state sample (the simulator: ``u_applied``) |
+| ``applied`` | AppliedCommand (raw) | best effort, depth 1 | as ``sim/true_state`` (the
+  driver: ``u``) |
 | ``estop`` (out) | std_msgs/Bool | latched | made when the rig is found |
 | ``/diagnostics`` (out) | DiagnosticArray | reliable | one status per e-stop from the page |
 
 Services it calls: the parameter services of every node, ``controller/set_mode``,
 ``sim/disturb``, every ``estop`` (SetBool) of the rig.
 
-It never slows the loop: it subscribes to the loop's 1 kHz ``state`` only while a page
+The e-stop state it shows is the plant's (its ``estop`` value on ``/diagnostics``), with the
+requests of this console beside it (:mod:`rwpend_console.estop`, kept on the board).
+
+It never slows the loop: it subscribes to the loop's 1 kHz topics only while a page
 watches, best effort (the writer never waits for it or repeats a sample for it), depth 1, and
 takes it by polling (:mod:`rwpend_console.taps`, every :data:`POLL_S`): the newest sample
 then, never a wake-up per sample. Decimation (:class:`rwpend_console.decimate.Decimator`)
@@ -37,7 +44,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Bool
 
-from rwpend_msgs.msg import ControllerStatus, StateEstimate
+from rwpend_msgs.msg import AppliedCommand, ControllerStatus, PlantState, StateEstimate
 from rwpend_ros import wire
 from rwpend_ros.diagnostics import publish_diagnostic
 from rwpend_ros.qos import QOS_LATCHED, QOS_STATUS
@@ -63,12 +70,18 @@ class CallError(RuntimeError):
 
 
 class RigWatch:
-    """What the console holds for one watched rig: its feed, decimators and subscriptions."""
+    """What the console holds for one watched rig: its feed, decimators and subscriptions
+    (``taps``, ``watchers`` and ``applied_on`` under ``lock``: the executor's thread and the
+    Taps thread change them)."""
 
-    def __init__(self, rate_hz: float) -> None:
+    def __init__(self, ns: str, rate_hz: float) -> None:
+        self.ns = ns
+        self.lock = threading.Lock()
+        self.applied_on = False
         self.feed = Feed()
         self.state_dec = Decimator(rate_hz)
         self.status_dec = Decimator(rate_hz)
+        self.applied_decs = {'sim/true_state': Decimator(rate_hz), 'applied': Decimator(rate_hz)}
         self.watchers = 0
         self.taps: list[Tap] = []
 
@@ -213,9 +226,21 @@ class DomainWatcher(RosWorker):
             _, stamp = wire.message_seq_stamp(data)
         except Exception:  # noqa: BLE001 - malformed bytes: not shown
             return
+        if not w.applied_on:
+            self._start_applied(w)
         if w.state_dec.admit(stamp):
             m = deserialize_message(data, StateEstimate)
             w.feed.add_state(stamp, time.time_ns(), m.theta, m.theta_dot, m.wheel_rate, m.energy)
+
+    def _on_applied(self, w: RigWatch, topic: str, msg_type, field: str, taken: list) -> None:
+        """The command the motor got: ``field`` of the newest ``msg_type`` taken (raw bytes)."""
+        data = taken[-1][0]
+        try:
+            _, stamp = wire.message_seq_stamp(data)
+        except Exception:  # noqa: BLE001 - malformed bytes: not shown
+            return
+        if w.applied_decs[topic].admit(stamp):
+            w.feed.add_applied(stamp, getattr(deserialize_message(data, msg_type), field))
 
     def _on_statuses(self, w: RigWatch, taken: list) -> None:
         for m, _ in taken:
@@ -228,16 +253,38 @@ class DomainWatcher(RosWorker):
         return self.in_spin(lambda: self._watch(ns))
 
     def _watch(self, ns: str) -> Feed:
-        w = self.watches.setdefault(ns, RigWatch(self.rate_hz))
-        w.watchers += 1
-        if w.watchers == 1:
-            base = ns.rstrip('/')
-            w.taps = [Tap(StateEstimate, f'{base}/state', QOS_OBSERVER, lambda t, w=w: self._on_states(w, t)),
-                      Tap(ControllerStatus, f'{base}/controller/status', QOS_STATUS_IN,
-                          lambda t, w=w: self._on_statuses(w, t), raw=False, limit=QOS_STATUS_IN.depth)]
-            for tap in w.taps:
-                self.taps.add(tap).result(timeout=5.0)
+        w = self.watches.setdefault(ns, RigWatch(ns, self.rate_hz))
+        added = []
+        with w.lock:
+            w.watchers += 1
+            if w.watchers == 1:
+                base = ns.rstrip('/')
+                w.taps = [Tap(StateEstimate, f'{base}/state', QOS_OBSERVER, lambda t, w=w: self._on_states(w, t)),
+                          Tap(ControllerStatus, f'{base}/controller/status', QOS_STATUS_IN,
+                              lambda t, w=w: self._on_statuses(w, t), raw=False, limit=QOS_STATUS_IN.depth)]
+                added = [self.taps.add(tap) for tap in w.taps]
+        for fut in added:
+            fut.result(timeout=5.0)
         return w.feed
+
+    def _start_applied(self, w: RigWatch) -> None:
+        """(The Taps thread, at the first state sample of a watch.) Take the command the motor
+        got -- ``sim/true_state`` (simulator), ``applied`` (driver) -- from now on: only once the
+        rig's samples flow, never before its run starts (a lockstep simulator with a recorder
+        holds sample 0 until one subscriber of sim/true_state, the recorder, listens:
+        ``start.true_state_subscribers``; the console must not count as that recorder)."""
+        with w.lock:       # posted under the lock: a last page going away removes them after
+            if w.watchers == 0 or w.applied_on:
+                return
+            w.applied_on = True
+            base = w.ns.rstrip('/')
+            new = [Tap(PlantState, f'{base}/sim/true_state', QOS_OBSERVER,
+                       lambda t, w=w: self._on_applied(w, 'sim/true_state', PlantState, 'u_applied', t)),
+                   Tap(AppliedCommand, f'{base}/applied', QOS_OBSERVER,
+                       lambda t, w=w: self._on_applied(w, 'applied', AppliedCommand, 'u', t))]
+            w.taps += new
+            for tap in new:
+                self.taps.add(tap)     # made on this thread at its next poll
 
     def unwatch(self, ns: str) -> None:
         """A page stopped watching: the last one takes the subscriptions away (the feed stays).
@@ -252,11 +299,13 @@ class DomainWatcher(RosWorker):
         w = self.watches.get(ns)
         if w is None or w.watchers == 0:
             return
-        w.watchers -= 1
-        if w.watchers == 0:
-            for tap in w.taps:
-                self.taps.remove(tap)
-            w.taps = []
+        with w.lock:
+            w.watchers -= 1
+            if w.watchers == 0:
+                for tap in w.taps:
+                    self.taps.remove(tap)
+                w.taps = []
+                w.applied_on = False
 
     # ------------------------------------------------------------ the graph
     def service_names(self, ns: str, suffix: str, type_name: str) -> list[str]:
@@ -280,12 +329,17 @@ class DomainWatcher(RosWorker):
     # ------------------------------------------------------------ e-stop
     def publish_estop(self, ns: str, on: bool, clicked_ns: int | None) -> None:
         """The e-stop on the rig's latched ``estop`` topic, at once (no service round trip), and
-        a status on /diagnostics stamped with the time of the click (a bag shows both)."""
+        a status on /diagnostics stamped with the time of the click (a bag shows both); the
+        request is noted beside the plant's reports (:meth:`estop_state`), after it went out
+        (nothing delays it) with the time it was sent: a report of the change is always newer."""
+        sent = time.monotonic()
         pub = self.estop_pubs.get(ns)
         if pub is None:
             pub = self.in_spin(lambda: self.estop_pubs.setdefault(
                 ns, self.node.create_publisher(Bool, f'{ns.rstrip("/")}/estop', QOS_LATCHED)))
         pub.publish(Bool(data=bool(on)))
+        with self.board_lock:
+            self.board.estop_requested(ns, bool(on), sent)
         now = time.time_ns()
         stamp = clicked_ns if clicked_ns is not None and abs(clicked_ns - now) < 10_000_000_000 else now
         publish_diagnostic(self.diag_pub, stamp, f'{ns.rstrip("/")}/console: e-stop', 'rwpend_console',
@@ -296,6 +350,11 @@ class DomainWatcher(RosWorker):
     def lights(self, ns: str) -> list[dict]:
         with self.board_lock:
             return [x.as_dict() for x in self.board.lights(ns, time.monotonic())]
+
+    def estop_state(self, ns: str) -> dict:
+        """The rig's e-stop as its plant last reported it (:class:`rwpend_console.estop.EstopState`)."""
+        with self.board_lock:
+            return self.board.estop(ns, time.monotonic()).as_dict()
 
     def summary(self, ns: str) -> dict:
         with self.board_lock:

@@ -8,8 +8,10 @@ Routes (JSON unless said otherwise; the action decides what access needs,
 | GET ``/`` , ``/static/NAME`` | view | the page, its script and style |
 | GET ``/api/info`` | view | whether acting needs the token; the plots' window |
 | GET ``/api/overview`` | view | every rig of the watched domains: mode, health, e-stop |
-| GET ``/api/rig?rig=ID`` | view | its nodes, lights, recording |
+| GET ``/api/rig?rig=ID`` | view | its nodes, lights, e-stop state, recording |
 | GET ``/api/params?rig=ID&node=N`` | view | the gains panel of a node |
+| GET ``/api/modes?rig=ID`` | view | the mode buttons (``law`` usable with the controller's
+  ``law.file``) |
 | GET ``/api/stream?rig=ID`` | view | Server-Sent Events: ``frame`` (decimated samples, every
   :data:`FRAME_PERIOD_S`), ``status`` (lights, overview, every :data:`STATUS_PERIOD_S`) |
 | GET ``/api/bags``, ``/api/plot?bag=NAME`` | view | the bags folder, a bag's analysis (PNG) |
@@ -48,6 +50,7 @@ GET_ROUTES = {
     '/api/overview': lambda app, q: app.overview(),
     '/api/rig': lambda app, q: app.rig_info(q.get('rig')),
     '/api/params': lambda app, q: app.params(q.get('rig'), q.get('node')),
+    '/api/modes': lambda app, q: app.modes(q.get('rig')),
     '/api/bags': lambda app, q: app.bag_list(),
     '/api/lab': lambda app, q: app.lab_state(),
 }
@@ -195,7 +198,7 @@ def stream_events(out, app: ConsoleApp, feed, rid: str) -> None:
         gen = batch['gen']
         now = time.monotonic()
         batch['sent_ms'] = time.time() * 1e3
-        if batch['reset'] or batch['s'] or batch['u'] or batch['b']:
+        if batch['reset'] or batch['s'] or batch['u'] or batch['a'] or batch['b']:
             out.write(event('frame', batch))
         if now - last_status >= STATUS_PERIOD_S:
             last_status = now

@@ -48,3 +48,20 @@ def test_memory_is_bounded():
         f.add_state(k * 1000, 0, 0.0, 0.0, 0.0, 0.0)
     batch, _ = f.since(None, 1e9)
     assert len(batch['s']) == 100
+
+
+def test_the_applied_command_beside_what_the_controller_sent():
+    """``a`` rows: what the motor got (zero under the e-stop while the controller sends 10); the
+    motor lag's subnormal leftovers come as exactly 0."""
+    f = Feed()
+    f.add_status(0, True, 10.0, True, 'auto', 'swingup')
+    f.add_applied(0, 5e-324)
+    f.add_applied(S // 50, -5e-324)
+    f.add_applied(2 * S // 50, 7.5)
+    f.add_status(S // 50, True, -3e-12, False, 'auto', 'swingup')
+    batch, cur = f.since(None, 20.0)
+    assert batch['a'] == [[0.0, 0.0], [0.02, 0.0], [0.04, 7.5]]
+    assert batch['u'] == [[0.0, 10.0, True], [0.02, 0.0, False]]
+    f.add_applied(3 * S // 50, 1.0)
+    nxt, _ = f.since(cur, 20.0, batch['gen'])
+    assert nxt['a'] == [[0.06, 1.0]] and nxt['s'] == [] and nxt['u'] == []

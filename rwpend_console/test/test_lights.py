@@ -59,3 +59,23 @@ def test_overview_rows():
     assert board(late='0.5').summary('/rwpend', 100.0)['level'] == 'warn'
     assert b.summary('/rig2', 100.0)['level'] == 'error'
     assert StatusBoard().summary('/none', 0.0)['level'] == 'stale'
+
+
+def test_the_estop_light_and_state_follow_the_plant():
+    """Raised from this console, cleared elsewhere (./rwpend estop --clear): the light and the
+    board's e-stop say clear (the console used to keep its own raise)."""
+    b = board(now=100.0)
+    b.estop_requested('/rwpend', True, 100.5)
+    assert lights(b, 100.6)['estop'].level == 'warn', 'sent, not reported yet'
+    b.update('/rwpend/sim: plant', 2, 'e-stop latched: motor at zero', {'estop': 'True'}, 100.7)
+    st = b.estop('/rwpend', 100.8)
+    assert (st.state, st.by) == ('raised', 'console') and lights(b, 100.8)['estop'].level == 'error'
+    assert b.summary('/rwpend', 100.8)['estop'] is True
+    b.update('/rwpend/sim: plant', 0, 'running', {'estop': 'False'}, 105.0)
+    st = b.estop('/rwpend', 105.1)
+    assert (st.state, st.by) == ('clear', 'elsewhere') and 'cleared elsewhere' in st.text
+    e = lights(b, 105.1)['estop']
+    assert e.level == 'ok' and e.message == st.text
+    assert b.summary('/rwpend', 105.1)['estop'] is False
+    assert b.estop('/rig2', 105.1).state == 'unknown', 'a rig without a plant report'
+    assert b.estop('/rwpend', 105.0 + STALE_AFTER_S + 1).state == 'unknown', 'the rig lost'

@@ -120,3 +120,47 @@ def test_the_controllers_own_specs_judged_before_sending():
     with pytest.raises(ValueError, match='balance.design.zeta must be > 0'):
         coerce_value(zeta, '0')
     assert coerce_value(_field_of(specs['balance.kpp']), '50') == 50.0, 'stability is the node\'s to judge'
+
+
+def test_ranges_are_written_for_a_reader():
+    """The field's range with its open ends, bounds in 6 significant digits (they were printed
+    as raw floats: '1 .. 183.72549019607843'), the other constraints as notes."""
+    from rwpend_console.panel import notes_text, range_text
+    from rwpend_control.parameters import controller_specs
+    rig = load_rig()
+    specs = {s.name: s for s in controller_specs(rig, 2)}
+    limit = _field_of(specs['wheel_speed_limit'])
+    assert range_text(limit) == f'≥ 1 and < {float(rig.omega_max):.6g}'
+    assert notes_text(limit) == '', 'the bound of the constraints is in the range'
+    assert range_text(_field_of(specs['status_every'])) == '1 .. 1000000'
+    assert range_text(_field_of(specs['balance.design.zeta'])) == '> 0'
+    assert range_text(_field_of(specs['swingup.design.k_v'])) == '≥ 0'
+    cid = _field_of(specs['controller_id'])
+    assert (range_text(cid), notes_text(cid)) == ('≥ 0', '< 2^63')
+    kpp = _field_of(specs['balance.kpp'])
+    assert notes_text(kpp) == 'closed loop (4.8) stable'
+    assert notes_text(_field_of(specs['mode'])).startswith('one of: off, ')
+    assert range_text(_field_of(specs['mode'])) == ''
+    for s in specs.values():
+        text = range_text(_field_of(s))
+        for number in text.replace('≥', ' ').replace('≤', ' ').replace('>', ' ').replace('<', ' ') \
+                .replace('..', ' ').replace('and', ' ').replace(',', ' ').split():
+            if number != 'step':
+                assert len(number.split('e')[0].lstrip('-').replace('.', '').lstrip('0')) <= 7, (s.name, text)
+    fields = {f.name: f for f in build_fields('/rwpend/controller', VALUES, DESCR)}
+    assert range_text(fields['balance.kpp']) == '-1000 .. 0'
+    assert range_text(fields['rig.g']) == '' and range_text(fields['balance.design.omega0']) == ''
+    odd = Field(node='/n', name='p', type='integer', value=4, minimum=0, maximum=100, step=5)
+    assert range_text(odd) == '0 .. 100, step 5'
+    assert range_text(Field(node='/n', name='p', type='double', value=1.0, constraints='<= 0.30000000000000004')) \
+        == '≤ 0.3'
+
+
+def test_the_page_gets_the_whole_value_and_the_texts():
+    fields = {f.name: f.as_dict() for f in build_fields('/rwpend/controller', {
+        **VALUES, 'balance.kpp': ('double', -312.34567891234567)}, DESCR)}
+    kpp = fields['balance.kpp']
+    assert kpp['value_text'] == '-312.34567891234565' and float(kpp['value_text']) == kpp['value']
+    assert kpp['range_text'] == '-1000 .. 0' and kpp['notes'] == ''
+    assert fields['undescribed']['value_text'] == 'true'
+    assert fields['balance.design.omega0']['value_text'] == '1.5wp'

@@ -1,6 +1,8 @@
 """The console's ROS side in-process (own contexts, a test domain id): polled taps take only the
-newest sample, a watched rig's state comes decimated into its feed, the subscriptions go with
-the last page, the e-stop goes out on the rig's latched topic with a record on /diagnostics."""
+newest sample, a watched rig's state and applied command come decimated into its feed (the
+applied command taken only once the rig's samples flow), the subscriptions go with the last
+page, the e-stop goes out on the rig's latched topic with a record on /diagnostics, and the
+e-stop state shown is the plant's report."""
 import time
 
 import pytest
@@ -15,7 +17,8 @@ from std_msgs.msg import Bool  # noqa: E402
 
 from rwpend_console.rosside import QOS_OBSERVER, DomainWatcher  # noqa: E402
 from rwpend_console.taps import Tap, Taps  # noqa: E402
-from rwpend_msgs.msg import ControllerStatus, StateEstimate  # noqa: E402
+from rwpend_msgs.msg import ControllerStatus, PlantState, StateEstimate  # noqa: E402
+from rwpend_ros.diagnostics import publish_diagnostic  # noqa: E402
 from rwpend_ros.qos import QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS  # noqa: E402
 from rwpend_ros.testenv import test_domain_id  # noqa: E402
 
@@ -84,6 +87,8 @@ def test_a_depth_one_tap_takes_the_newest_sample_only(peer, domain):
 def test_a_watched_rig_feeds_the_page_and_the_estop_goes_out(peer, domain):
     st = peer.create_publisher(StateEstimate, '/rig/state', QOS_CONTROL_PUB)
     status = peer.create_publisher(ControllerStatus, '/rig/controller/status', QOS_STATUS)
+    truth = peer.create_publisher(PlantState, '/rig/sim/true_state', QOS_CONTROL_PUB)
+    diag_out = peer.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
     diag_in = []
     peer.create_subscription(DiagnosticArray, '/diagnostics', diag_in.append, QOS_STATUS)
     estops = []
@@ -98,8 +103,13 @@ def test_a_watched_rig_feeds_the_page_and_the_estop_goes_out(peer, domain):
         feed = w.watch('/rig')
         assert wait(lambda: st.get_subscription_count() == 1 and status.get_subscription_count() == 1)
         time.sleep(0.5)
+        assert truth.get_subscription_count() == 0, 'sim/true_state not taken before the samples flow'
         for k in range(1000):                               # 1 s of samples at 1 kHz
             st.publish(state(k))
+            if k >= 100:
+                p = PlantState(seq=k, u_commanded=0.0, u_applied=5e-324 if k % 2 else 0.25)
+                p.header.stamp = state(k).header.stamp
+                truth.publish(p)
             if k % 10 == 0:
                 m = ControllerStatus(mode='auto', law='swingup' if k < 500 else 'catch', u=1.0)
                 m.header.stamp = state(k).header.stamp
@@ -109,12 +119,22 @@ def test_a_watched_rig_feeds_the_page_and_the_estop_goes_out(peer, domain):
         batch, _ = feed.since(None, 20.0)
         assert 5 <= len(batch['s']) <= 51, len(batch['s'])   # decimated to <= 50 per second of samples
         assert [b[2] for b in batch['b']] == ['swingup', 'catch'], batch['b']
+        assert truth.get_subscription_count() == 1
+        assert 2 <= len(batch['a']) <= 46 and {r[1] for r in batch['a']} <= {0.0, 0.25}, batch['a']
         w.unwatch('/rig')
-        assert wait(lambda: st.get_subscription_count() == 0), 'the subscription goes with the last page'
+        assert wait(lambda: st.get_subscription_count() == 0 and truth.get_subscription_count() == 0), \
+            'the subscriptions go with the last page'
         w.publish_estop('/rig', True, time.time_ns())
         assert wait(lambda: (ex.spin_once(timeout_sec=0.01) or True) and estops and any(
             s.name == '/rig/console: e-stop' for d in diag_in for s in d.status))
         assert estops[-1].data is True
+        assert w.estop_state('/rig')['state'] == 'unknown', 'nothing from the plant yet: not "raised"'
+        publish_diagnostic(diag_out, time.time_ns(), '/rig/sim: plant', '/rig', 2, 'e-stop latched: motor at zero',
+                           {'estop': True})
+        assert wait(lambda: w.estop_state('/rig')['state'] == 'raised')
+        publish_diagnostic(diag_out, time.time_ns(), '/rig/sim: plant', '/rig', 0, 'running', {'estop': False})
+        assert wait(lambda: w.estop_state('/rig')['state'] == 'clear')
+        assert w.estop_state('/rig')['by'] == 'elsewhere' and w.summary('/rig')['estop'] is False
     finally:
         w.close()
         ex.shutdown()

@@ -42,7 +42,12 @@ class FakeApp:
         return {'rigs': []}
 
     def rig_info(self, rig):
-        return {'id': rig, 'lights': [], 'summary': {}, 'nodes': []}
+        return {'id': rig, 'lights': [], 'summary': {}, 'nodes': [],
+                'estop': {'state': 'clear', 'text': 'e-stop clear (sim reports)', 'pending': ''}}
+
+    def modes(self, rig):
+        self.rig(rig)
+        return {'modes': [{'mode': 'law', 'usable': False, 'help': 'needs a law'}]}
 
     def mode(self, body):
         self.calls.append(('mode', body))
@@ -129,6 +134,7 @@ def test_a_shared_console_needs_the_token_except_for_the_estop(server):
 def test_stream_sends_frames_and_status_and_lets_go(server):
     app, port = server
     app.w.feed.add_state(1_000_000_000, 2_000_000_000, 0.1, 0.2, 0.3, 0.4)
+    app.w.feed.add_applied(1_000_000_000, -5e-324)
     c = http.client.HTTPConnection('127.0.0.1', port, timeout=10)
     c.request('GET', '/api/stream?rig=0:/rwpend', headers={'Host': f'127.0.0.1:{port}'})
     r = c.getresponse()
@@ -140,6 +146,8 @@ def test_stream_sends_frames_and_status_and_lets_go(server):
             name = line[7:].strip()
             events[name] = json.loads(r.fp.readline().decode()[6:])
     assert events['frame']['s'] == [[1.0, 0.1, 0.2, 0.3, 0.4, 2000.0]] and events['status']['rig']['id'] == '0:/rwpend'
+    assert events['frame']['a'] == [[1.0, 0.0]], 'the applied command, its subnormal leftover as 0'
+    assert events['status']['rig']['estop']['state'] == 'clear'
     assert app.w.watching == 1
     c.close()
     assert req(port, 'GET', '/api/stream?rig=nonsense')[0] == 400
@@ -147,3 +155,20 @@ def test_stream_sends_frames_and_status_and_lets_go(server):
 
 def test_finite():
     assert finite({'a': [1.0, float('inf'), {'b': float('nan')}], 'c': 'x'}) == {'a': [1.0, None, {'b': None}], 'c': 'x'}
+
+
+def test_mode_buttons_route(server):
+    _, port = server
+    status, _, body = req(port, 'GET', '/api/modes?rig=0:/rwpend')
+    assert status == 200 and json.loads(body)['modes'][0] == {'mode': 'law', 'usable': False, 'help': 'needs a law'}
+    assert req(port, 'GET', '/api/modes?rig=nonsense')[0] == 400
+
+
+def test_the_page_has_the_new_parts(server):
+    """The e-stop state, the applied-command readout, the mode note; the script formats numbers."""
+    _, port = server
+    page = req(port, 'GET', '/')[2]
+    for part in (b'id="estop-state"', b'id="readout-applied"', b'id="mode-note"', b'id="lights"'):
+        assert part in page, part
+    js = req(port, 'GET', '/static/console.js')[2]
+    assert b'rwpendFormat' in js and b"'law'" in js and b'/api/modes' in js
