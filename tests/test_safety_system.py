@@ -852,15 +852,14 @@ def test_estop_holds_the_plant_at_zero_until_cleared(tmp_path, ros_env):
     assert np.all(truth['u_commanded'][held] == 0.0)
     jj = np.nonzero(held)[0]
     assert np.all(np.abs(truth['u_applied'][jj[5:]]) < 0.05)    # motor lag T_e = 0.5 ms
-    # ... whatever the controller sent meanwhile (it tried to catch the falling pendulum)
+    # the controller switched off when the e-stop was raised (its estop/state), and stays off
+    # after the clear until a mode is set (test_user_trips_system goes on from there)
     sent = (cmd['_log_ns'] > on[0] + 20_000_000) & (cmd['_log_ns'] < off[0])
     m['commands_during_estop'] = int(sent.sum())
-    m['max_abs_u_sent_during_estop'] = float(np.max(np.abs(cmd['u'][sent])))
-    assert m['max_abs_u_sent_during_estop'] > 1.0
-    # cleared: the commands reach the plant again
+    assert np.all(cmd['u'][sent] == 0.0)
     m['estop_samples'] = int(diag[-1][4]['estop_samples'])
     after = log_ns > off[0] + 20_000_000
-    assert np.any(truth['u_commanded'][after] != 0.0)
+    assert after.sum() > 200 and np.all(truth['u_commanded'][after] == 0.0)
     print('measured:', json.dumps(m), 'seq', int(seq[k_on]))
 
 

@@ -70,7 +70,8 @@ from .launch import Launcher
 
 DEFAULT_PERIODS = (0.001, 0.0005)
 #: bench layouts -> ./rwpend up arguments
-LAYOUT_ARGS = {'separate': [], 'control': ['--composed', 'control'], 'composed': ['--composed', 'all']}
+LAYOUT_ARGS = {'loop': ['--composed', 'loop'], 'separate': ['--composed', 'none'],
+               'control': ['--composed', 'control'], 'composed': ['--composed', 'all']}
 #: ``--pin`` of the real-time runs by default (when CPUs 0 and 1 are usable): separate processes
 #: only, the simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free.
 #: Measured (PERFORMANCE.md, 20.): lower median latency in 10 of 10 interleaved pairs, lower p99
@@ -792,10 +793,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--h', type=float, action='append', default=None, metavar='S',
                    help='sample period(s) to run (repeatable; default 0.001 and 0.0005)')
     p.add_argument('--layout', action='append', default=None, choices=(*LAYOUT_ARGS, 'both', 'all'),
-                   help='separate: every node its own process; control: estimator and controller '
-                   'in one process, the plant in its own (up --composed control); composed: plant, '
-                   'estimator and controller in one process (up --composed); repeatable; both = '
-                   'separate and composed, all = the three (default)')
+                   help='loop: the loop in one thread of one process (the default of up, '
+                   'rwpend_loop.host); separate: every node its own process; control: estimator and '
+                   'controller in one process, the plant in its own (up --composed control); composed: '
+                   'plant, estimator and controller on the in-process bus (up --composed all); '
+                   'repeatable; both = separate and composed, all = the four (default)')
     p.add_argument('--lockstep-duration', type=float, default=None,
                    help='simulated seconds of each lockstep run (default 12; 4 with --quick)')
     p.add_argument('--no-realtime', action='store_true', help='skip the real-time runs')

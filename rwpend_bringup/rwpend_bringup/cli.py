@@ -478,22 +478,23 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
 
 
 def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
-    """The simulator, estimator, controller and recorder of ``specs`` as nodes of one loop
-    process (rwpend_loop.host): the sample path in one thread, the bag written from the bytes the
-    nodes publish. The simulator's start-up waits for subscribers are for separate processes
-    and are dropped (the host waits for what is outside it)."""
+    """The simulator, estimator and controller of ``specs`` as nodes of one loop process
+    (rwpend_loop.host): the sample path in one thread. In lockstep the recorder is a node of that
+    process too (the bag written from the bytes the nodes publish, as fast as the loop runs); in
+    real time it stays a process of its own below the loop's priority (it can wait, the loop
+    cannot), and sample 0 waits for it as in the other layouts."""
     members = [s for s in specs if s.name in ('sim', 'estimator', 'controller')
                and s.module == NODE_MODULES[s.name]]
     sim = members[0]
-    for key in ('start.encoders_subscribers', 'start.true_state_subscribers', 'start.state_subscribers',
-                'lockstep_recorder_window'):
-        sim.params.pop(key, None)
     args = [s.name for s in members]
     rest = [s for s in specs if s not in members]
     rec = next((s for s in rest if s.name == 'recorder'), None)
-    if rec is not None:
+    sim.params.pop('start.state_subscribers', None)
+    if rec is not None and a.lockstep:
         rest.remove(rec)
-        args += ['--record', str(a.record)] + (['--sim-time'] if a.lockstep else [])
+        args += ['--record', str(a.record), '--sim-time']
+        for key in ('start.encoders_subscribers', 'start.true_state_subscribers', 'lockstep_recorder_window'):
+            sim.params.pop(key, None)
     host = NodeSpec('loop', 'rwpend_loop.host', args=args, node_params={s.name: s.params for s in members},
                     stop_rank=min(s.stop_rank for s in members))
     return [host, *rest]

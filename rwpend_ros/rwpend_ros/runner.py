@@ -77,6 +77,18 @@ def freeze_gc() -> None:
         gc.freeze()
 
 
+def close_nodes(nodes) -> None:
+    """``close()`` every node that has one, the last built first; an error is printed, the
+    others are still closed."""
+    for node in reversed(nodes):
+        close = getattr(node, 'close', None)
+        if callable(close):
+            try:
+                close()
+            except Exception as exc:  # noqa: BLE001 - report, keep shutting down
+                print(f'error while closing {node.get_name()}: {exc}', file=sys.stderr, flush=True)
+
+
 def run_node(factory: Callable[[], Any], args: list[str] | None = None) -> int:
     """Run one node in this process until SIGINT/SIGTERM; returns the exit status
     (:func:`run_nodes` with one factory and no bus)."""
@@ -136,13 +148,7 @@ def run_nodes(factories: Iterable[Callable[[Any], Any]], args: list[str] | None 
     finally:
         if bus is not None:
             bus.close()
-        for node in reversed(nodes):
-            close = getattr(node, 'close', None)
-            if callable(close):
-                try:
-                    close()
-                except Exception as exc:  # noqa: BLE001 - report, keep shutting down
-                    print(f'error while closing {node.get_name()}: {exc}', file=sys.stderr, flush=True)
+        close_nodes(nodes)
         for node in nodes:
             trace = getattr(node, 'trace', None)    # rwpend_ros.trace (RWPEND_TRACE set)
             if trace is not None:
