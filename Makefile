@@ -1,5 +1,5 @@
 # rwpend — two commands on a fresh Debian 12 machine: `make demo` and `make test`.
-.PHONY: setup setup-browser demo test test-unit test-system test-network bench soak lab clean distclean
+.PHONY: setup setup-browser demo test test-unit test-system test-network bench soak lab firmware clean distclean
 
 PY := .venv/bin/python
 
@@ -37,8 +37,14 @@ lab: setup
 	@rm -rf lab_out/all
 	@./rwpend lab run all --out lab_out/all
 
+# the rig's reference firmware (firmware/README.md): the STM32F405/F407 image with its size report,
+# and the core built for this PC (the emulator's); installs Debian's gcc-arm-none-eabi where missing
+firmware:
+	@bash tools/setup.sh --firmware
+	@$(MAKE) --no-print-directory -C firmware
+
 clean:
-	rm -rf build demo_out bench_out soak_out lab_out lab_report .pytest_cache
+	rm -rf build firmware/build demo_out bench_out soak_out lab_out lab_report .pytest_cache
 
 distclean: clean
 	rm -rf .venv

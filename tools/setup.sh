@@ -15,6 +15,24 @@ PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_loop rwpend_bringup rwpend_lab rwpend_ident rwpend_console"
 
+# --firmware (make firmware): only the cross compiler of the rig's reference firmware (firmware/),
+# Debian's gcc-arm-none-eabi and its newlib. Nothing else of the set-up below.
+firmware_tools() {
+  local need=""
+  command -v arm-none-eabi-gcc >/dev/null 2>&1 || need="$need gcc-arm-none-eabi"
+  dpkg-query -W -f='${Status}' libnewlib-arm-none-eabi 2>/dev/null | grep -q "install ok installed" \
+    || need="$need libnewlib-arm-none-eabi"
+  if [ -n "$need" ]; then
+    echo "setup: installing the firmware's cross compiler:$need"
+    if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO=sudo; fi
+    $SUDO apt-get update -qq && $SUDO apt-get install -y -qq $need
+  fi
+}
+if [ "${1:-}" = --firmware ]; then
+  firmware_tools
+  exit 0
+fi
+
 need_apt=""
 if [ "${1:-}" = --browser ]; then   # the console's page tests (make test): Debian's chromium + its driver
   command -v chromium >/dev/null 2>&1 || need_apt="$need_apt chromium"
