@@ -274,8 +274,10 @@ def choose_defaults(a) -> list[str]:
         a.composed = 'all'
     given = getattr(a, 'composed', None)
     layout = given or DEFAULT_LAYOUT[plant]
-    if given is None and getattr(a, 'only', None):
-        layout = 'none'         # a stack split across hosts: each part a process of its own
+    if given is None and getattr(a, 'only', None) and layout == 'loop':
+        # a stack split across hosts (--only sim / control / recorder): the plant in a process
+        # of its own, the estimator and the controller in another
+        layout = 'control'
     if layout in ('all', 'loop') and plant != 'sim':
         layout = 'control' if given is None else layout
     a.composed = None if layout == 'none' else layout
