@@ -93,7 +93,15 @@ class RecordingPublisher:
         if self._subscribed or not isinstance(data, (bytes, bytearray)):
             self._pub.publish(data)
         if self._put is not None and isinstance(data, (bytes, bytearray)):
-            self._put(self.topic, bytes(data), time.time_ns())
+            self._put(self.topic, wire_bytes(data), time.time_ns())
+
+
+def wire_bytes(data) -> bytes:
+    """The bytes as a subscriber takes them from DDS: Fast DDS pads a serialized payload with
+    zeros to a multiple of 4 bytes, so a bag recorded here is the bag a recorder in another
+    process records, byte for byte."""
+    pad = -len(data) % 4
+    return bytes(data) + b'\0' * pad if pad else bytes(data)
 
     def __getattr__(self, name):
         return getattr(self._pub, name)

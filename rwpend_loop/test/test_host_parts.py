@@ -1,7 +1,7 @@
 """The host's plain parts (no rclpy): the loop lock, the recording publisher, the arguments."""
 import pytest
 
-from rwpend_loop.host import LoopLock, RecordingPublisher, parse_args
+from rwpend_loop.host import LoopLock, RecordingPublisher, parse_args, wire_bytes
 
 
 class FakePub:
@@ -24,7 +24,7 @@ def test_recording_publisher_records_every_message_and_publishes_while_subscribe
     rp = RecordingPublisher(pub, lambda topic, data, t: put.append((topic, data)))
     for i in range(RecordingPublisher.LOOK_EVERY + 10):
         rp.publish(bytes([i % 256]))
-    assert len(put) == RecordingPublisher.LOOK_EVERY + 10 and put[0] == ('/rwpend/encoders', b'\x00')
+    assert len(put) == RecordingPublisher.LOOK_EVERY + 10 and put[0] == ('/rwpend/encoders', b'\x00\0\0\0')
     # published until it looked and found nobody, then not
     assert len(pub.sent) == RecordingPublisher.LOOK_EVERY - 1
     pub.subscribers = 1
@@ -52,3 +52,8 @@ def test_arguments():
     for bad in (['estimator'], ['sim', 'sim'], ['sim', 'bogus'], ['sim', 'controller']):
         with pytest.raises(SystemExit):
             parse_args(bad)
+
+
+def test_recorded_bytes_are_padded_as_dds_delivers_them():
+    assert wire_bytes(b'abcdef') == b'abcdef\0\0' and wire_bytes(b'abcd') == b'abcd'
+    assert wire_bytes(bytearray(b'a')) == b'a\0\0\0'
