@@ -1,13 +1,9 @@
-"""Device-side logic of the rig's microcontroller, stated in Python: PROTOCOL.md's firmware contract
-as the PC side's tests use it (a device on a fake wire for the driver's link tests).
-
-The firmware itself is C: ``firmware/core`` (the STM32 board's code), which ``./rwpend emulate``
-runs (emulator.py); ``rwpend_driver/test/test_firmware.py`` feeds both the same random traffic and
-checks that every frame they send is the same.
+"""Device-side logic of the rig's microcontroller: the reference implementation of the firmware.
 
 :class:`DeviceCore` is pure (no I/O, no clock of its own): the caller feeds the received bytes
 with :meth:`DeviceCore.receive` and calls :meth:`DeviceCore.tick` once per sample period with
-the current time; both return the bytes to transmit. The tests run it with a fake clock.
+the current time; both return the bytes to transmit.  The emulator (emulator.py) runs it on a
+pseudo-terminal in real time; the tests run it with a fake clock.
 
 Per tick (sample k -> k+1):
 1. watchdog: enabled and more than ``watchdog_period`` since the last valid COMMAND (or since

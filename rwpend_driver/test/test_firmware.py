@@ -1,12 +1,12 @@
 """The reference firmware's core (firmware/core, C99) on this PC, through ctypes: the same code the
-STM32 board runs and the emulator runs.
+STM32 board runs (rwpend_driver.firmware).
 
 * its frame codec against the driver's (rwpend_driver.protocol) on the same bytes;
 * its device logic against the Python statement of the contract (rwpend_driver.device) on the same
   random traffic, frame for frame;
 * watchdog, e-stop (ENABLE 0 held until ENABLE 1), the "too old" rule, counter wrap, bad frames
   (truncated, bad CRC, unknown type, oversized: counted, never acted on, never a crash);
-* the build: the host library from the emulator's own build function (always), the board's image
+* the build: the host library (rwpend_driver.firmware.build_host_library, always), the board's image
   (where Debian's arm-none-eabi-gcc is installed: ``make firmware``), and the board's image booted
   in QEMU's netduinoplus2 (an STM32F405) with the driver's handshake and a few hundred
   SAMPLE/COMMAND exchanges over its USART (where qemu-system-arm is installed).
@@ -24,7 +24,7 @@ import time
 
 import pytest
 
-from rwpend_driver import emulator as E
+from rwpend_driver import firmware as E
 from rwpend_driver import protocol as P
 from rwpend_driver.device import DeviceCore
 from rwpend_model.plant import Plant
@@ -36,7 +36,7 @@ REQUESTS = {P.HELLO, P.COMMAND, P.ENABLE, P.SET_WATCHDOG, P.ZERO}
 
 @pytest.fixture(scope='module')
 def lib():
-    E.build_host_library()            # the emulator's own build step: always runs where cc is
+    E.build_host_library()            # always runs where cc is
     return E.load_library()
 
 
