@@ -1,4 +1,4 @@
-"""The firmware's core as the emulator calls it: through ctypes, per sample one COMMAND frame in and
+"""The firmware's core as a PC-side caller uses it: through ctypes, per sample one COMMAND frame in and
 one sample instant (tick_begin + tick_end), N times. Prints the mean and the distribution.
 
     ./rwpend exec python firmware/bench/rw_bench_ctypes.py [N]        (N = 1 000 000)
@@ -8,7 +8,7 @@ import sys
 import time
 
 from rwpend_driver import protocol as P
-from rwpend_driver.emulator import FirmwareCore
+from rwpend_driver.firmware import FirmwareCore
 from rwpend_model.rig import load_rig
 
 
