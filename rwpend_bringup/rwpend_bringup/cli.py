@@ -491,9 +491,10 @@ def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
     args = [s.name for s in members]
     rest = [s for s in specs if s not in members]
     rec = next((s for s in rest if s.name == 'recorder'), None)
-    sim.params.pop('start.state_subscribers', None)
     if rec is not None and a.lockstep:
         rest.remove(rec)
+        if 'start.state_subscribers' in sim.params:     # the recorder no longer subscribes to state
+            sim.params['start.state_subscribers'] -= 1
         args += ['--record', str(a.record), '--sim-time']
         for key in ('start.encoders_subscribers', 'start.true_state_subscribers', 'lockstep_recorder_window'):
             sim.params.pop(key, None)

@@ -185,9 +185,13 @@ class Host:
         # start.encoders_subscribers counts the estimator (here, when hosted) and a recorder
         n_enc = max(0, sim.p['start.encoders_subscribers'] - (self.est is not None))
         n_true = sim.p['start.true_state_subscribers']
+        # lockstep: start.state_subscribers counts the controller (here, when hosted) and the
+        # subscribers of state outside (a console whose page must be open before sample 0)
+        n_state = max(0, sim.p['start.state_subscribers'] - (self.ctrl is not None)) if sim.lockstep else 0
         while not self.stop.is_set():
             ok = (sim.count_subscribers(enc_topic) >= n_enc
-                  and sim.count_subscribers(sim.resolve_topic_name('sim/true_state')) >= n_true)
+                  and sim.count_subscribers(sim.resolve_topic_name('sim/true_state')) >= n_true
+                  and sim.count_subscribers(sim.resolve_topic_name('state')) >= n_state)
             if self.est is None:
                 ok = ok and sim.count_subscribers(enc_topic) >= 1
             if self.ctrl is None and sim.lockstep:   # (real time: the plant runs without one)
