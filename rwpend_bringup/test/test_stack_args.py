@@ -8,6 +8,9 @@ import pytest
 from rwpend_bringup import cli
 from rwpend_bringup.cli import Parser, add_stack_args, build_stack, choose_defaults
 
+#: a bag path that does not exist (build_stack refuses one that does)
+NO_BAG = '/tmp/rwpend-test-no-such-bag'
+
 
 def specs_of(*argv):
     p = Parser(prog='rwpend up')
@@ -17,14 +20,14 @@ def specs_of(*argv):
 
 
 def test_rt_priority_and_cpus_go_to_the_environment():
-    s = specs_of('--record', '/tmp/x', '--rt-priority', '50', '--cpus', '1:0')
+    s = specs_of('--record', NO_BAG, '--rt-priority', '50', '--cpus', '1:0')
     assert s['sim'].env['RWPEND_RT_PRIORITY'] == '50' and s['recorder'].env['RWPEND_RT_PRIORITY'] == '40'
     assert {s[n].env['RWPEND_CPUS'] for n in ('sim', 'estimator', 'controller')} == {'1'}
     assert s['recorder'].env['RWPEND_CPUS'] == '0'
 
 
 def test_cpus_without_recorder_part_leaves_the_recorder_free():
-    s = specs_of('--record', '/tmp/x', '--cpus', '0')
+    s = specs_of('--record', NO_BAG, '--cpus', '0')
     assert s['sim'].env['RWPEND_CPUS'] == '0' and 'RWPEND_CPUS' not in s['recorder'].env
     assert 'RWPEND_CPUS' not in specs_of()['sim'].env
 
@@ -41,7 +44,7 @@ def test_bad_cpus_refused(bad):
 
 
 def test_composed_layouts():
-    s = specs_of('--composed', 'all', '--record', '/tmp/x', '--rt-priority', '50')
+    s = specs_of('--composed', 'all', '--record', NO_BAG, '--rt-priority', '50')
     assert list(s) == ['stack', 'recorder'] and s['stack'].args == ['sim', 'estimator', 'controller']
     assert s['stack'].env['RWPEND_RT_PRIORITY'] == '50'
     c = specs_of('--composed', 'control', '--plant', 'serial:/dev/ttyUSB0', '--rt-priority', '50')
@@ -81,11 +84,11 @@ def test_cpu_latency_must_be_an_integer(capsys):
 def test_bad_environment_switch_refused_before_anything_starts(monkeypatch, name, bad):
     monkeypatch.setenv(name, bad)
     with pytest.raises(ValueError, match=name):
-        specs_of('--record', '/tmp/x')
+        specs_of('--record', NO_BAG)
 
 
 def test_pin_sets_one_process_and_overrides_cpus():
-    s = specs_of('--record', '/tmp/x', '--cpus', '0,1', '--pin', 'sim=0', '--pin', 'controller=1',
+    s = specs_of('--record', NO_BAG, '--cpus', '0,1', '--pin', 'sim=0', '--pin', 'controller=1',
                  '--pin', 'recorder=0,1')
     assert s['sim'].env['RWPEND_CPUS'] == '0' and s['controller'].env['RWPEND_CPUS'] == '1'
     assert s['estimator'].env['RWPEND_CPUS'] == '0,1' and s['recorder'].env['RWPEND_CPUS'] == '0,1'
@@ -209,13 +212,13 @@ def defaults_of(*argv):
 
 def test_defaults_real_time_priority_where_permitted_and_the_layout_of_the_plant(monkeypatch):
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
-    a, s, notes = defaults_of('--record', '/tmp/x')
-    assert a.rt_priority == cli.DEFAULT_RT_PRIORITY and s['sim'].env['RWPEND_RT_PRIORITY'] == '50'
-    assert a.composed == cli.DEFAULT_LAYOUT['sim'] and 'control' in s
+    a, s, notes = defaults_of('--record', NO_BAG)
+    assert a.rt_priority == cli.DEFAULT_RT_PRIORITY and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
+    assert a.composed == cli.DEFAULT_LAYOUT['sim'] == 'loop' and 'loop' in s
     assert any('layout' in n for n in notes) and any('real-time priority: 50' in n for n in notes)
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (False, 'Operation not permitted'))
     a, s, notes = defaults_of()
-    assert a.rt_priority == 0 and 'RWPEND_RT_PRIORITY' not in s['sim'].env
+    assert a.rt_priority == 0 and 'RWPEND_RT_PRIORITY' not in s['loop'].env
     assert any('not permitted here' in n for n in notes)
 
 
@@ -242,8 +245,8 @@ def test_realtime_permitted_answers_without_changing_this_thread():
 
 
 def test_only_runs_a_part_with_the_parameters_of_the_whole_stack():
-    whole = specs_of('--lockstep', '--record', '/tmp/x')
-    part = specs_of('--lockstep', '--record', '/tmp/x', '--only', 'sim')
+    whole = specs_of('--lockstep', '--record', NO_BAG)
+    part = specs_of('--lockstep', '--record', NO_BAG, '--only', 'sim')
     assert list(part) == ['sim'] and part['sim'].params == whole['sim'].params
     assert part['sim'].params['start.encoders_subscribers'] == 2, 'it waits for the recorder elsewhere'
     two = specs_of('--composed', 'none', '--only', 'estimator,controller')
@@ -279,3 +282,24 @@ def test_serial_duration_is_counted_by_the_driver():
     s = specs_of('--plant', 'serial:/dev/ttyUSB0', '--duration', '14')
     assert s['driver'].params['duration'] == 14.0 and s['driver'].params['port'] == '/dev/ttyUSB0'
     assert 'duration' not in specs_of('--plant', 'serial:/dev/ttyUSB0')['driver'].params
+
+
+def test_the_loop_layout_is_the_default_on_the_simulator(monkeypatch, tmp_path):
+    monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
+    bag = str(tmp_path / 'bag')
+    a, s, notes = defaults_of('--lockstep', '--record', bag, '--mode', 'auto')
+    assert list(s) == ['loop'] and a.composed == 'loop'
+    assert s['loop'].module == 'rwpend_loop.host'
+    assert s['loop'].args == ['sim', 'estimator', 'controller', '--record', bag, '--sim-time']
+    sim = s['loop'].node_params['sim']
+    assert 'lockstep_recorder_window' not in sim and 'start.encoders_subscribers' not in sim
+    assert sim['start.state_subscribers'] == 1, 'the controller; the recorder is in the process'
+    assert s['loop'].node_params['controller']['mode'] == 'auto'
+    # real time: the recorder a process of its own, below the loop; sample 0 waits for it
+    a, s, _ = defaults_of('--record', bag)
+    assert list(s) == ['loop', 'recorder'] and s['loop'].args == ['sim', 'estimator', 'controller']
+    assert s['loop'].node_params['sim']['start.encoders_subscribers'] == 2
+    assert s['recorder'].env['RWPEND_RT_PRIORITY'] == '40' and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
+    # a split stack and the driver keep their layouts
+    assert set(defaults_of('--only', 'sim')[1]) == {'sim'}
+    assert defaults_of('--plant', 'serial:/dev/null')[0].composed == 'control'
