@@ -99,9 +99,16 @@ def test_node_publishes_refuses_and_switches(graph):
     assert len(joints) == 5
     pub_cmd.publish(MotorCommand(seq=8, u=25.0))
     assert spin_until(ex, lambda: node.align.u_seq == 8)
-    # ~/reset
+    # ~/reset: refused while the loop drives the rig (u = 25 answered seq 8) ...
     cli = tester.create_client(Trigger, node.get_fully_qualified_name() + '/reset')
     assert spin_until(ex, cli.service_is_ready)
+    fut = cli.call_async(Trigger.Request())
+    assert spin_until(ex, fut.done) and not fut.result().success
+    assert 'reset refused: the loop is driving the rig' in fut.result().message
+    assert node.refused_resets == 1 and states[-1].seq == 8
+    # ... taken once the last non-zero command is more than RESET_QUIET_S old
+    from rwpend_estimation.estimator_node import RESET_QUIET_S
+    node.last_drive_seq = 8 - int(RESET_QUIET_S / node.rig.sample_period) - 1
     fut = cli.call_async(Trigger.Request())
     assert spin_until(ex, fut.done) and fut.result().success
     pub_enc.publish(sample(9, pendulum_counts=11, motor_counts=25))
