@@ -455,12 +455,13 @@ def test_token_is_required_from_another_address(browser, ros_env, tmp_path):
         wait_for(lambda: page_data(browser, 'window.rwpendEstop && window.rwpendEstop.answer.ok'), 60, 'the e-stop')
         browser.get(f'http://{addr}:{port}/?rig={rig}&token={token}')
         wait_for(lambda: browser.find_elements(By.CSS_SELECTOR, '.mode-btn'), 60, 'the page')
-        browser.find_element(By.CSS_SELECTOR, '.mode-btn[data-mode="wheel_velocity"]').click()
-        wait_for(lambda: browser.find_element(By.ID, 'mode-msg').text, 60, 'the answer')
-        assert 'wheel_velocity' in browser.find_element(By.ID, 'mode-msg').text
-        assert param_get(ros_env, 'mode') == 'wheel_velocity', 'with the token the mode changed'
+        # with the token: the clear, then a mode (refused while the e-stop is raised)
         browser.find_element(By.ID, 'estop-clear').click()
         wait_for(lambda: browser.find_element(By.ID, 'estop-msg').text == 'e-stop cleared', 60, 'the clear')
+        wait_for(lambda: estop_shown(browser)[0] == 'clear', 60, 'the e-stop shown clear')
+        browser.find_element(By.CSS_SELECTOR, '.mode-btn[data-mode="wheel_velocity"]').click()
+        wait_for(lambda: 'wheel_velocity' in browser.find_element(By.ID, 'mode-msg').text, 60, 'the answer')
+        wait_for(lambda: param_get(ros_env, 'mode') == 'wheel_velocity', 30, 'with the token the mode changed')
     finally:
         stop(console)
         stop(up)
