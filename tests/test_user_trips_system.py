@@ -126,3 +126,21 @@ def test_reset_is_refused_while_balancing(tmp_path, ros_env):
     assert np.max(np.abs(deviation(state['theta']))) < 0.1, 'the estimate kept the absolute angle: no jump'
     status = strings(bag, '/rwpend/controller/status', ['mode'])
     assert all(mode == 'balance' for _, mode in status[1:]), status[:5]
+
+
+@pytest.mark.system
+@pytest.mark.timeout(300)
+@pytest.mark.xfail(strict=False, reason=(
+    'OPEN: the two bags differ from sim/true_state #88 on (3 s, auto from hanging), and the lab '
+    "Experiment 3 measured b_p of the +5 pulse 1.128 against 1.081 through the loop layout; cause "
+    'not found yet, so the loop is not the default of up'))
+def test_the_loop_layout_gives_the_bag_of_separate_processes(tmp_path, ros_env):
+    """The loop in one thread (--composed loop, the recorder in its process) and the nodes as
+    separate processes give the same lockstep bag: every loop message, byte for byte."""
+    from rwpend_bag import sameness
+    bags = {}
+    for layout in ('loop', 'none'):
+        bags[layout] = tmp_path / layout
+        rwpend(['up', '--lockstep', '--duration', '3', '--mode', 'auto', '--tap', '2:0.5', '--composed', layout,
+                '--record', str(bags[layout])], ros_env, timeout=240)
+    assert sameness.compare(bags['loop'], bags['none']) == []
