@@ -284,7 +284,7 @@ def choose_defaults(a) -> list[str]:
         layout = 'control' if given is None else layout
     a.composed = None if layout == 'none' else layout
     notes.append(f'layout: {LAYOUT_TEXT[layout]}' + ('' if given else f' (the default for --plant {plant}; '
-                                                      '--composed all|control|none to change)'))
+                                                      '--composed loop|all|control|none to change)'))
     prio = getattr(a, 'rt_priority', None)
     if prio is None:
         if a.lockstep:
