@@ -130,12 +130,8 @@ def test_reset_is_refused_while_balancing(tmp_path, ros_env):
 
 @pytest.mark.system
 @pytest.mark.timeout(300)
-@pytest.mark.xfail(strict=False, reason=(
-    'OPEN: the two bags differ from sim/true_state #88 on (3 s, auto from hanging), and the lab '
-    "Experiment 3 measured b_p of the +5 pulse 1.128 against 1.081 through the loop layout; cause "
-    'not found yet, so the loop is not the default of up'))
 def test_the_loop_layout_gives_the_bag_of_separate_processes(tmp_path, ros_env):
-    """The loop in one thread (--composed loop, the recorder in its process) and the nodes as
+    """The loop in one thread (the default layout, the recorder in its process) and the nodes as
     separate processes give the same lockstep bag: every loop message, byte for byte."""
     from rwpend_bag import sameness
     bags = {}

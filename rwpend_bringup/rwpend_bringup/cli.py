@@ -52,10 +52,11 @@ COMPOSITIONS = ('loop', 'all', 'control')
 LOCKSTEP_RECORDER_WINDOW = 50
 #: ./rwpend up in real time: the loop's SCHED_FIFO priority where permitted (--rt-priority)
 DEFAULT_RT_PRIORITY = 50
+#: rmw_fastrtps's publication mode (SYNCHRONOUS: publish() sends; ASYNCHRONOUS: a thread of Fast
+#: DDS sends): the real-time loop process publishes asynchronously unless the user chose
+PUBLICATION_MODE_VAR = 'RMW_FASTRTPS_PUBLICATION_MODE'
 #: ./rwpend up without --composed: the layout per plant (PERFORMANCE.md, "Layouts")
-#: (the loop layout, --composed loop, is not the default yet: the lab's Experiment 3 measured b_p of
-#: the +5 pulse 4 % high through it, 1.128 against 1.081, not yet explained)
-DEFAULT_LAYOUT = {'sim': 'control', 'serial': 'control'}
+DEFAULT_LAYOUT = {'sim': 'loop', 'serial': 'control'}
 LAYOUT_TEXT = {'loop': 'the loop in one real-time thread of one process (simulator, estimator, controller '
                        'and the recorder as its nodes)',
                'none': 'separate processes (plant, estimator, controller)',
@@ -502,6 +503,10 @@ def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
             sim.params.pop(key, None)
     host = NodeSpec('loop', 'rwpend_loop.host', args=args, node_params={s.name: s.params for s in members},
                     stop_rank=min(s.stop_rank for s in members))
+    if not a.lockstep and PUBLICATION_MODE_VAR not in os.environ:
+        # Fast DDS sends the observers' messages from its own thread (no GIL): publish() queues
+        # them, the loop goes on (PERFORMANCE.md, "The loop"); a user's setting is kept
+        host.env[PUBLICATION_MODE_VAR] = 'ASYNCHRONOUS'
     return [host, *rest]
 
 

@@ -213,12 +213,12 @@ def defaults_of(*argv):
 def test_defaults_real_time_priority_where_permitted_and_the_layout_of_the_plant(monkeypatch):
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
     a, s, notes = defaults_of('--record', NO_BAG)
-    assert a.rt_priority == cli.DEFAULT_RT_PRIORITY and s['control'].env['RWPEND_RT_PRIORITY'] == '50'
-    assert a.composed == cli.DEFAULT_LAYOUT['sim'] == 'control' and 'control' in s
+    assert a.rt_priority == cli.DEFAULT_RT_PRIORITY and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
+    assert a.composed == cli.DEFAULT_LAYOUT['sim'] == 'loop' and 'loop' in s
     assert any('layout' in n for n in notes) and any('real-time priority: 50' in n for n in notes)
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (False, 'Operation not permitted'))
     a, s, notes = defaults_of()
-    assert a.rt_priority == 0 and 'RWPEND_RT_PRIORITY' not in s['sim'].env
+    assert a.rt_priority == 0 and 'RWPEND_RT_PRIORITY' not in s['loop'].env
     assert any('not permitted here' in n for n in notes)
 
 
@@ -284,10 +284,11 @@ def test_serial_duration_is_counted_by_the_driver():
     assert 'duration' not in specs_of('--plant', 'serial:/dev/ttyUSB0')['driver'].params
 
 
-def test_the_loop_layout(monkeypatch, tmp_path):
+def test_the_loop_layout_is_the_default_on_the_simulator(monkeypatch, tmp_path):
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
+    monkeypatch.delenv(cli.PUBLICATION_MODE_VAR, raising=False)
     bag = str(tmp_path / 'bag')
-    a, s, notes = defaults_of('--lockstep', '--record', bag, '--mode', 'auto', '--composed', 'loop')
+    a, s, notes = defaults_of('--lockstep', '--record', bag, '--mode', 'auto')
     assert list(s) == ['loop'] and a.composed == 'loop'
     assert s['loop'].module == 'rwpend_loop.host'
     assert s['loop'].args == ['sim', 'estimator', 'controller', '--record', bag, '--sim-time']
@@ -296,8 +297,12 @@ def test_the_loop_layout(monkeypatch, tmp_path):
     assert sim['start.state_subscribers'] == 1, 'the controller; the recorder is in the process'
     assert s['loop'].node_params['controller']['mode'] == 'auto'
     # real time: the recorder a process of its own, below the loop; sample 0 waits for it
-    a, s, _ = defaults_of('--record', bag, '--composed', 'loop')
+    assert cli.PUBLICATION_MODE_VAR not in s['loop'].env
+    a, s, _ = defaults_of('--record', bag)
     assert list(s) == ['loop', 'recorder'] and s['loop'].args == ['sim', 'estimator', 'controller']
+    assert s['loop'].env[cli.PUBLICATION_MODE_VAR] == 'ASYNCHRONOUS', 'real time: Fast DDS sends'
+    monkeypatch.setenv(cli.PUBLICATION_MODE_VAR, 'SYNCHRONOUS')
+    assert cli.PUBLICATION_MODE_VAR not in defaults_of('--record', bag)[1]['loop'].env, "the user's choice" 
     assert s['loop'].node_params['sim']['start.encoders_subscribers'] == 2
     assert s['recorder'].env['RWPEND_RT_PRIORITY'] == '40' and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
     # a split stack and the driver keep their layouts

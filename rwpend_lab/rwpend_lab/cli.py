@@ -11,7 +11,7 @@ from .experiment import NEEDS, LabError, Options
 
 USAGE = """usage: rwpend lab list
        rwpend lab run N|N-M|all [--plant sim|serial:PORT] [--out DIR] [--set NODE.PARAM=VALUE ...]
-                                [--law FILE.py] [--composed [all|control]]
+                                [--law FILE.py] [--composed [loop|all|control|none]]
        rwpend lab template N [-o FILE]
        rwpend lab report DIR... [-o OUT]"""
 
@@ -127,8 +127,9 @@ def run_main(argv) -> int:
                    "book's printed numbers)")
     p.add_argument('--law', default=None, metavar='FILE.py', help='your own law in place of the built-in one '
                    '(./rwpend lab template N writes a template)')
-    p.add_argument('--composed', nargs='?', const='all', default=None, choices=('all', 'control'),
-                   help='run the nodes in one process, as ./rwpend up --composed')
+    p.add_argument('--composed', nargs='?', const='all', default=None, choices=('loop', 'all', 'control', 'none'),
+                   help="the stack's layout, as ./rwpend up --composed (default: up's, the loop in one "
+                   'process)')
     a = p.parse_args(argv)
     t0 = time.monotonic()
     try:

@@ -21,9 +21,9 @@ from __future__ import annotations
 EXIT_LOOP_DEAD = 3
 
 #: advice printed with a "slow" verdict
-SLOW_ADVICE = ('run the loop in one process (./rwpend up --composed), give it real-time priority '
-               '(--rt-priority 50, as root or with an rtprio limit), keep other programs off the '
-               'machine, or sample more slowly (--h 0.002)')
+SLOW_ADVICE = ('give the loop real-time priority (--rt-priority 50, as root or with an rtprio limit), '
+               'keep other programs off the machine, run the loop in one process (--composed loop, '
+               'the default of ./rwpend up on the simulator), or sample more slowly (--h 0.002)')
 
 
 class LoopHealth:
