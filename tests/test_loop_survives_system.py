@@ -56,7 +56,7 @@ def test_up_fails_with_the_reason_when_the_loop_is_dead_at_the_end(tmp_path, ros
 @pytest.mark.timeout(300)
 def test_soak_short_version(tmp_path, ros_env):
     duration, faults = soak.SHORT
-    r = soak.run_layout('control', duration, faults, tmp_path, load=True,
+    r = soak.run_layout('loop', duration, faults, tmp_path, load=True,
                         domain=int(ros_env['ROS_DOMAIN_ID']))
     print(soak.summary([r]))
     v = r['verdict']
