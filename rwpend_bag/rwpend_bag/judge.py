@@ -23,6 +23,12 @@ What is judged, and from which topic (θ from hanging, upright = π; x = wrap(θ
   of the run (their last stamp within ``tail_s`` of the plant's last sample).
 * **gaps accounted for**: the seq gaps seen in the bag, per loop topic, equal those the
   recorder's ``recording_report.json`` lists.
+* **timing, per sample** (``sim/true_state.command_seq``; figures, not a verdict): from the first
+  sample a command answered, a sample is *late* when the command the plant held over the
+  interval before it did not answer the previous sample (0 <= command_seq < seq - 1), and *at
+  zero* when the command timeout held the motor at 0 (command_seq = -1).
+
+``python -m rwpend_bag.judge BAG...`` prints the verdict of each bag, timing included.
 """
 from __future__ import annotations
 
@@ -110,7 +116,18 @@ class Verdict:
     gaps: dict = field(default_factory=dict)        # topic -> seen / reported
     unaccounted: list = field(default_factory=list)  # topics whose gaps the report does not list
     resyncs: int | None = None
+    samples: int = 0                  # plant samples in the bag (sim/true_state)
+    timed_samples: int = 0            # of them from the first one a command answered on
+    late_samples: int = 0             # the command held did not answer the previous sample
+    zero_samples: int = 0             # the command timeout held the motor at 0
     problems: list = field(default_factory=list)
+
+    def timing(self) -> str:
+        """One line: samples, late and at-zero shares (of the timed samples)."""
+        n = max(self.timed_samples, 1)
+        return (f'{self.samples} samples; late {self.late_samples} = {100 * self.late_samples / n:.3f} %, '
+                f'at zero {self.zero_samples} = {100 * self.zero_samples / n:.3f} % '
+                f'(of {self.timed_samples} from the first command)')
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -155,7 +172,16 @@ def judge(run: dict, *, timeout_samples: int = 3, up: float = 0.3, fallen: float
     v.alive_at_end = bool(np.all(x[end] < up))
     if not v.alive_at_end:
         v.problems.append(f'not balanced over the last {end_s:g} s (max |theta - pi| {x[end].max():.2f} rad)')
+    v.samples = len(t)
     if 'command_seq' in truth:
+        cs = truth['command_seq'].astype(np.int64)
+        seq = truth['seq'].astype(np.int64)
+        answered = np.nonzero(cs >= 0)[0]
+        if len(answered):
+            timed = slice(int(answered[0]), None)
+            v.timed_samples = len(cs[timed])
+            v.late_samples = int(np.sum((cs[timed] >= 0) & (cs[timed] < seq[timed] - 1)))
+            v.zero_samples = int(np.sum(cs[timed] < 0))
         age = truth['seq'].astype(np.int64) - 1 - truth['command_seq'].astype(np.int64)
         driven = truth['u_commanded'] != 0.0
         bad = driven & ((truth['command_seq'] < 0) | (age >= timeout_samples))
@@ -192,3 +218,34 @@ def judge(run: dict, *, timeout_samples: int = 3, up: float = 0.3, fallen: float
             v.problems.append(f'{name}: {len(seen)} gaps ({missing} missing) in the bag, the report says '
                               f'{listed.get("gap_count")} ({listed.get("missing")})')
     return v
+
+
+def main(argv=None) -> int:
+    """``python -m rwpend_bag.judge BAG...``: the verdict of each bag, with its timing; exit 1 when
+    a bag has problems, 2 when one cannot be read."""
+    import argparse
+    import sys
+    p = argparse.ArgumentParser(prog='python -m rwpend_bag.judge',
+                                description='The verdict of a run from its bag (read with rosbags): alive at the '
+                                'end, falls, stale commands, latched streams, gaps, and the late share per sample.')
+    p.add_argument('bags', nargs='+', help='bag directories (rosbag2 layout)')
+    a = p.parse_args(argv)
+    status = 0
+    for bag in a.bags:
+        try:
+            v = judge(read_run(bag))
+        except Exception as exc:  # noqa: BLE001 - a bag that cannot be read: said, the others go on
+            print(f'{bag}: cannot be read: {type(exc).__name__}: {exc}', file=sys.stderr)
+            status = 2
+            continue
+        print(f'{bag}: {v.timing()}; falls {v.falls}, recoveries {v.recoveries}, '
+              f'alive at the end {v.alive_at_end}')
+        for problem in v.problems:
+            print(f'  problem: {problem}')
+        if v.problems and status == 0:
+            status = 1
+    return status
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -78,3 +78,24 @@ def test_seq_gaps():
     assert seq_gaps([3, 3, 2, 4]) == []        # duplicates / a step back are no gaps
     assert seq_gaps([0, 5, 3, 4, 9]) == [(1, 4), (6, 8)]
     assert seq_gaps([]) == []
+
+
+def test_timing_counts_late_and_zero_samples_from_the_first_command():
+    n = 1000
+    cs = np.arange(n) - 1
+    cs[:5] = -1                                # before the first command: not counted
+    cs[100:103] = 98                           # held the command of 98 over 3 intervals: 3 late
+    cs[500:504] = -1                           # the timeout held the motor at 0
+    u = np.ones(n)
+    u[:5] = 0.0
+    u[500:504] = 0.0
+    v = judge(run(np.full(n, np.pi), u=u, command_seq=cs))
+    assert v.samples == n and v.timed_samples == n - 5
+    assert v.late_samples == 3 and v.zero_samples == 4
+    assert 'late 3 = 0.302 %' in v.timing() and 'at zero 4' in v.timing()
+
+
+def test_the_command_line_reads_bags_and_says_when_one_cannot_be_read(tmp_path, capsys):
+    from rwpend_bag.judge import main
+    assert main([str(tmp_path / 'no-such-bag')]) == 2
+    assert 'cannot be read' in capsys.readouterr().err

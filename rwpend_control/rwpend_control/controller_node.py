@@ -349,6 +349,7 @@ class ControllerNode(RwNode):
         """What the law gave for state ``seq``: ``command`` (with the state's header), the
         status when due or changed, the log lines of switches and faults; returns the
         command's bytes (None: the state was refused unanswered)."""
+        self._last_header = header          # (the loop's own states come here, not through on_state)
         if not st.answer:
             self.unanswered += 1
             self.get_logger().warn(st.fault, throttle_duration_sec=1.0)
