@@ -6,6 +6,7 @@ have no default: designed at start from ``<group>.design.*`` unless given.
 """
 from __future__ import annotations
 
+from rwpend_ros.sched import thread_priority_spec
 from rwpend_ros.paramspec import ParamSpec
 
 from .laws import FRICTION_MODES
@@ -99,6 +100,7 @@ def controller_specs(rig, state_queue_depth: int) -> list[ParamSpec]:
                   'one controller at a time: rwpend_ros.claim); 0 = a random id drawn at start '
                   '(./rwpend up --lockstep gives a fixed one, so that lockstep bags are the same '
                   'every run)', low=0, read_only=True, constraints='< 2^63'),
+        thread_priority_spec(),
     ]
     for name, default in DESIGN_DEFAULTS.items():
         if name in FREQUENCY_TEXT:

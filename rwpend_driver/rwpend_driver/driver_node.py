@@ -52,7 +52,7 @@ from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS
 from rwpend_ros.runner import run_node
-from rwpend_ros.sched import raise_thread_priority
+from rwpend_ros.sched import raise_thread_priority, thread_priority_spec
 from rwpend_ros.trace import tracer
 
 from . import link_health
@@ -64,6 +64,7 @@ RO = partial(ParamSpec, read_only=True)
 #: The driver's parameters, all read-only (set at start): name, default, description, bounds
 #: (those of :meth:`rwpend_driver.link.LinkConfig.errors`, which judges them again).
 PARAMS = [
+    thread_priority_spec(),
     RO('port', '', 'serial device of the rig (e.g. /dev/ttyACM0, or the emulator\'s --link path)',
        constraints='not empty'),
     RO('baud', 921600, 'baud rate (ignored by USB CDC and ptys)', low=1200, high=12_000_000),

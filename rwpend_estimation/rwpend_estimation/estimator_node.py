@@ -32,6 +32,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, StateEstimate
+from rwpend_ros.sched import thread_priority_spec
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.diagnostics import publish_diagnostic
@@ -83,6 +84,7 @@ PARAMS = [_config_spec(name, default) for name, default in asdict(EstimatorConfi
     ParamSpec('publish_joint_states', True, 'publish sensor_msgs/JointState on joint_states'),
     ParamSpec('diagnostics_period', 1.0, 'seconds between /diagnostics messages', low=0.0,
               low_open=True, read_only=True),
+    thread_priority_spec(),
 ]
 
 

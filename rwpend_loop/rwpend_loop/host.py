@@ -367,7 +367,7 @@ def main(argv=None) -> int:
     from rclpy.signals import SignalHandlerOptions
 
     from rwpend_ros.params import ConfigError
-    from rwpend_ros.runner import close_nodes, freeze_gc, make_executor, spin_executor
+    from rwpend_ros.runner import apply_thread_priority, close_nodes, freeze_gc, make_executor, spin_executor
     from rwpend_ros.sched import apply_scheduling
     from rwpend_ros.transport import apply_transport_or_exit
     a, ros = parse_args(sys.argv[1:] if argv is None else list(argv))
@@ -382,6 +382,7 @@ def main(argv=None) -> int:
     status = 0
     try:
         host = Host(a.nodes, a.record, a.sim_time)
+        apply_thread_priority(host.nodes)       # before the loop's thread starts: it inherits it
         executor = make_executor()
         for node in host.nodes:
             executor.add_node(node)

@@ -14,7 +14,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from rwpend_ros import intra
 from rwpend_ros.params import ConfigError
-from rwpend_ros.sched import apply_scheduling
+from rwpend_ros.sched import apply_scheduling, set_process_priority
 from rwpend_ros.transport import apply_transport_or_exit
 
 def make_executor():
@@ -77,6 +77,18 @@ def freeze_gc() -> None:
         gc.freeze()
 
 
+def apply_thread_priority(nodes) -> str | None:
+    """The highest ``thread_priority`` parameter of ``nodes`` (rwpend_ros.sched), taken by the
+    whole process; said on stderr. None when no node asks for one (0)."""
+    prio = max((int(n.get_parameter('thread_priority').value) for n in nodes
+                if n.has_parameter('thread_priority')), default=0)
+    if not prio:
+        return None
+    done = set_process_priority(prio)
+    print(f'rwpend: thread_priority {prio}: {done}', file=sys.stderr, flush=True)
+    return done
+
+
 def close_nodes(nodes) -> None:
     """``close()`` every node that has one, the last built first; an error is printed, the
     others are still closed."""
@@ -132,6 +144,7 @@ def run_nodes(factories: Iterable[Callable[[Any], Any]], args: list[str] | None 
     try:
         for factory in factories:
             nodes.append(factory(bus))
+        apply_thread_priority(nodes)
         executor = make_executor()
         for node in nodes:
             executor.add_node(node)

@@ -74,6 +74,38 @@ def realtime_permitted(priority: int = 50) -> tuple[bool, str]:
     return (result == ['']), (result[0] if result else 'no result')
 
 
+#: A node's ``thread_priority`` parameter (as ros2_control's controller manager has one): the
+#: SCHED_FIFO priority its process takes at start, so that ``./rwpend node X -p
+#: thread_priority:=50`` started alone, the ROS way, runs as it does under ``./rwpend up``.
+THREAD_PRIORITY_DESCRIPTION = ('SCHED_FIFO priority (1-99) of this node\'s process, taken at start where '
+                               'permitted (as ros2_control\'s thread_priority); 0: as the process was '
+                               'started (./rwpend up gives its processes --rt-priority)')
+
+
+def thread_priority_spec():
+    """The ``thread_priority`` parameter of a node (read-only, 0..99, default 0)."""
+    from rwpend_ros.paramspec import ParamSpec
+    return ParamSpec('thread_priority', 0, THREAD_PRIORITY_DESCRIPTION, low=0, high=99, read_only=True)
+
+
+def set_process_priority(priority: int) -> str:
+    """Every thread of this process (and those it starts later) at SCHED_FIFO ``priority``
+    (1-99); returns what was done, for the log -- never an error (not permitted: said)."""
+    if not 1 <= int(priority) <= 99:
+        raise ValueError(f'a SCHED_FIFO priority is 1..99, got {priority!r}')
+    try:
+        param = os.sched_param(int(priority))
+        tids = [int(t) for t in os.listdir('/proc/self/task')] if os.path.isdir('/proc/self/task') else [0]
+        for tid in tids:
+            try:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, param)
+            except ProcessLookupError:
+                pass                      # a thread that ended meanwhile
+        return f'SCHED_FIFO {int(priority)}'
+    except (OSError, AttributeError) as exc:
+        return f'SCHED_FIFO {int(priority)} not permitted ({exc}): ordinary scheduling'
+
+
 def raise_thread_priority(step: int = 1) -> str:
     """The calling thread (on Linux a policy is per thread) ``step`` real-time priorities above
     its process's SCHED_FIFO priority, so it runs ahead of the process's other threads and of the

@@ -102,3 +102,38 @@ def test_raise_thread_priority_only_for_real_time_threads():
         pytest.skip('SCHED_FIFO not permitted here')
     assert out['fifo'] == 'SCHED_FIFO 11' and out['after'] == 11
     assert os.sched_getscheduler(0) != os.SCHED_FIFO        # the test's own thread unchanged
+
+
+def test_thread_priority_parameter_and_the_process_taking_it():
+    """A node's thread_priority (read-only, 0..99, 0 = as started) and set_process_priority: every
+    thread of the process, those started before included (in a child process, where permitted)."""
+    import subprocess
+    import textwrap
+
+    from rwpend_ros.paramspec import check
+    from rwpend_ros.sched import set_process_priority, thread_priority_spec
+    spec = thread_priority_spec()
+    assert spec.name == 'thread_priority' and spec.default == 0 and spec.read_only
+    assert check(spec, 100) and not check(spec, 50) and not check(spec, 0)
+    with pytest.raises(ValueError, match='1..99'):
+        set_process_priority(0)
+    code = textwrap.dedent('''
+        import os, threading, time
+        from rwpend_ros.sched import set_process_priority
+        ev = threading.Event()
+        before = threading.Thread(target=ev.wait, daemon=True)
+        before.start()
+        done = set_process_priority(7)
+        after = threading.Thread(target=ev.wait, daemon=True)
+        after.start()
+        time.sleep(0.05)
+        prios = {os.sched_getparam(int(tid)).sched_priority for tid in os.listdir('/proc/self/task')}
+        print(done, '|', sorted(prios))
+        ev.set()
+    ''')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    done, prios = out.stdout.strip().split(' | ')
+    if 'not permitted' in done:
+        pytest.skip(done)
+    assert done == 'SCHED_FIFO 7' and prios == '[7]', out.stdout

@@ -34,6 +34,7 @@ from std_srvs.srv import SetBool
 
 from rwpend_msgs.msg import EncoderCounts, MotorCommand, PlantState
 from rwpend_msgs.srv import Disturb
+from rwpend_ros.sched import thread_priority_spec
 from rwpend_ros import wire
 from rwpend_ros.claim import CommandClaim, format_id
 from rwpend_ros.diagnostics import publish_diagnostic
@@ -52,6 +53,7 @@ RO = partial(ParamSpec, read_only=True)
 
 #: The simulator's parameters, all read-only (set at start): name, default, description, bounds.
 PARAMS = [
+    thread_priority_spec(),
     RO('lockstep', False, 'lockstep time mode: publish /clock, wait for the command of each sample'),
     RO('lockstep_timeout', 0.5, 'lockstep: wall seconds to wait for the command of a sample',
        low=0.0, low_open=True),
