@@ -95,6 +95,9 @@ class RecordingPublisher:
         if self._put is not None and isinstance(data, (bytes, bytearray)):
             self._put(self.topic, wire_bytes(data), time.time_ns())
 
+    def __getattr__(self, name):
+        return getattr(self._pub, name)
+
 
 def wire_bytes(data) -> bytes:
     """The bytes as a subscriber takes them from DDS: Fast DDS pads a serialized payload with
@@ -102,9 +105,6 @@ def wire_bytes(data) -> bytes:
     process records, byte for byte."""
     pad = -len(data) % 4
     return bytes(data) + b'\0' * pad if pad else bytes(data)
-
-    def __getattr__(self, name):
-        return getattr(self._pub, name)
 
 
 class Host:
@@ -132,6 +132,13 @@ class Host:
         elif self.sim.lockstep:
             self._tap(None)
         sim = self.sim
+        #: lockstep: the simulator's ROS time from its own samples (rwpend_ros.simtime), as the
+        #: estimator's and the controller's: no /clock subscription of its own, so /clock goes to
+        #: DDS only for readers outside the process (one DDS message and callback less per sample)
+        self.sim_clock = None
+        if sim.lockstep and sim.get_parameter('use_sim_time').value is True:
+            from rwpend_ros.simtime import SampleTime
+            self.sim_clock = SampleTime(sim)
         self.h = sim.h
         self.period_ns = sim.period_ns
         self.loop = Loop(sim.hw, sim.gate, self.est.stage if self.est else None,
@@ -252,6 +259,8 @@ class Host:
         from rwpend_ros import wire
         sim = self.sim
         enc = sim.publish_sample(stamp_ns, tick.reading)
+        if self.sim_clock is not None:
+            self.sim_clock(enc)
         sim.steps += 1
         if self.est is not None:
             self._publish_loop_nodes(tick, stamp_ns, enc)

@@ -33,6 +33,8 @@ def test_recording_publisher_records_every_message_and_publishes_while_subscribe
     assert pub.sent[-1] == b'x', 'a subscriber that came gets the messages from the next look on'
     rp.publish(object())            # a message object: always published, never recorded
     assert len(put) == 2 * RecordingPublisher.LOOK_EVERY + 10
+    # the rest is the rclpy publisher's (a node asks its publisher for its subscribers)
+    assert rp.get_subscription_count() == 1 and rp.topic_name == '/rwpend/encoders'
 
 
 def test_loop_lock_runs_callbacks_holding_it():
