@@ -52,9 +52,6 @@ COMPOSITIONS = ('loop', 'all', 'control')
 LOCKSTEP_RECORDER_WINDOW = 50
 #: ./rwpend up in real time: the loop's SCHED_FIFO priority where permitted (--rt-priority)
 DEFAULT_RT_PRIORITY = 50
-#: rmw_fastrtps's publication mode (SYNCHRONOUS: publish() sends; ASYNCHRONOUS: a thread of Fast
-#: DDS sends): the real-time loop process publishes asynchronously unless the user chose
-PUBLICATION_MODE_VAR = 'RMW_FASTRTPS_PUBLICATION_MODE'
 #: ./rwpend up without --composed: the layout per plant (PERFORMANCE.md, "Layouts")
 DEFAULT_LAYOUT = {'sim': 'loop', 'serial': 'control'}
 LAYOUT_TEXT = {'loop': 'the loop in one real-time thread of one process (simulator, estimator, controller '
@@ -503,10 +500,6 @@ def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
             sim.params.pop(key, None)
     host = NodeSpec('loop', 'rwpend_loop.host', args=args, node_params={s.name: s.params for s in members},
                     stop_rank=min(s.stop_rank for s in members))
-    if not a.lockstep and PUBLICATION_MODE_VAR not in os.environ:
-        # Fast DDS sends the observers' messages from its own thread (no GIL): publish() queues
-        # them, the loop goes on (PERFORMANCE.md, "The loop"); a user's setting is kept
-        host.env[PUBLICATION_MODE_VAR] = 'ASYNCHRONOUS'
     return [host, *rest]
 
 

@@ -286,7 +286,6 @@ def test_serial_duration_is_counted_by_the_driver():
 
 def test_the_loop_layout_is_the_default_on_the_simulator(monkeypatch, tmp_path):
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
-    monkeypatch.delenv(cli.PUBLICATION_MODE_VAR, raising=False)
     bag = str(tmp_path / 'bag')
     a, s, notes = defaults_of('--lockstep', '--record', bag, '--mode', 'auto')
     assert list(s) == ['loop'] and a.composed == 'loop'
@@ -297,12 +296,8 @@ def test_the_loop_layout_is_the_default_on_the_simulator(monkeypatch, tmp_path):
     assert sim['start.state_subscribers'] == 1, 'the controller; the recorder is in the process'
     assert s['loop'].node_params['controller']['mode'] == 'auto'
     # real time: the recorder a process of its own, below the loop; sample 0 waits for it
-    assert cli.PUBLICATION_MODE_VAR not in s['loop'].env
     a, s, _ = defaults_of('--record', bag)
     assert list(s) == ['loop', 'recorder'] and s['loop'].args == ['sim', 'estimator', 'controller']
-    assert s['loop'].env[cli.PUBLICATION_MODE_VAR] == 'ASYNCHRONOUS', 'real time: Fast DDS sends'
-    monkeypatch.setenv(cli.PUBLICATION_MODE_VAR, 'SYNCHRONOUS')
-    assert cli.PUBLICATION_MODE_VAR not in defaults_of('--record', bag)[1]['loop'].env, "the user's choice" 
     assert s['loop'].node_params['sim']['start.encoders_subscribers'] == 2
     assert s['recorder'].env['RWPEND_RT_PRIORITY'] == '40' and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
     # a split stack and the driver keep their layouts
