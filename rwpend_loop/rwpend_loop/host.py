@@ -124,6 +124,10 @@ class Host:
             from rwpend_control.controller_node import ControllerNode
             self.ctrl = ControllerNode(bus=self.lock, hosted=True)
         self.nodes = [n for n in (self.sim, self.est, self.ctrl) if n is not None]
+        if self.ctrl is not None:
+            from std_msgs.msg import Bool
+            ctrl = self.ctrl
+            self.sim.on_estop_change = lambda on: ctrl.on_estop_state(Bool(data=on))
         self.recorder = None
         if record:
             from rwpend_bag.recorder_node import Recorder

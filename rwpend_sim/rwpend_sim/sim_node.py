@@ -118,6 +118,9 @@ class SimNode(RwNode):
         sample's command is written); ``external_command``: commands also come from the
         ``command`` topic (a controller outside the loop)."""
         self.hosted = bool(hosted)
+        #: called with the new e-stop state, the loop's lock held, when it changes (the loop's
+        #: process gives its controller's on_estop_state)
+        self.on_estop_change = None
         super().__init__('sim', bus=bus)
         self.param_table = ParameterTable(self)
         self.rig = declare_rig(self.param_table)   # the plant's physical truth
@@ -310,6 +313,10 @@ class SimNode(RwNode):
             self.core.estop = on
             if changed:
                 self.pub_estop_state.publish(Bool(data=bool(on)))
+                if self.on_estop_change is not None:
+                    # a controller of the loop's process hears it before the next sample (its
+                    # estop/state subscription would take a DDS round trip: in lockstep, many samples)
+                    self.on_estop_change(bool(on))
                 # reported before any sample taken with the new state goes out (the lock holds
                 # the loop): in a bag the report comes first
                 self.publish_diagnostics()
