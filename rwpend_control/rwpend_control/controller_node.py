@@ -153,8 +153,10 @@ class ControllerNode(RwNode):
             QoSProfile(reliability=QOS_CONTROL_LATEST.reliability, history=QOS_CONTROL_LATEST.history,
                        depth=depth, durability=QOS_CONTROL_LATEST.durability))
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
-        # the plant's e-stop as it is (latched, from the simulator or the driver)
-        self.create_subscription(Bool, 'estop/state', self.on_estop_state, QOS_LATCHED)
+        # the plant's e-stop as it is (latched, from the simulator or the driver); in the loop's
+        # process the simulator calls on_estop_state itself, before the next sample (one path)
+        if not self.hosted:
+            self.create_subscription(Bool, 'estop/state', self.on_estop_state, QOS_LATCHED)
         # in the loop's slack: after the command of a sample, not while a state waits (19.)
         self.diag_timer = SlackTimer(self, 1.0, self.publish_diagnostics)
         self.create_timer(0.05, self._do_sync)
