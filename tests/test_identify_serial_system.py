@@ -46,13 +46,13 @@ def realtime_shortfall(status: int, text: str, out) -> str | None:
     return f'{100 * old_share:.0f} % of a run\'s commands came too late' if old_share > 0.1 else None
 
 
-#: an open defect, not a timing allowance (both serial tests): on a quiet 2-core VM they pass
-#: (a = 78.1652 against 78.1654), but on a loaded one the identification through the emulated
-#: heavy rig ran to the end with a wrong a (69.8-69.9, and 62.3 in a check, against 78.17; the free
-#: swing fitted with an rms residual of 510 counts): it does not notice that the swing it fitted
-#: was not a free swing; cause not found yet
-OPEN_SWING_DEFECT = ('OPEN: on a loaded machine the fit of the free swing through the emulator went '
-                     'wrong without being refused (a = 62-70 against 78.17); passes on a quiet one')
+#: an open defect, not a timing allowance (both serial tests): through the emulated heavy rig the
+#: fit of the free swing sometimes goes wrong and is not refused -- a = 69.8-69.9 and 62.3 against
+#: 78.17 (the swing fitted with an rms residual of 510 counts), or the energy time constant
+#: 3.5e25 s against 40 s with a = 77.92 -- on a loaded machine and on a quiet one alike; other
+#: runs pass (a = 78.1652 against 78.1654). Cause not found yet
+OPEN_SWING_DEFECT = ('OPEN: the fit of the free swing through the emulator sometimes goes wrong without '
+                     'being refused (a = 62-70 against 78.17, or an energy time constant of 3.5e25 s)')
 
 
 @pytest.mark.timeout(900)
