@@ -282,8 +282,10 @@ def test_live_gain_change_takes_effect_and_unstable_set_is_refused(tmp_path, ros
     bag_dir = tmp_path / 'gains'
     log_path = tmp_path / 'stack.log'
     log = open(log_path, 'w')
+    # lockstep runs several times faster than real time; the test stops the stack itself, so its
+    # duration is only a bound that each wait below must stay far from
     stack = subprocess.Popen([RWPEND, 'up', '--lockstep', '--mode', 'balance', '--theta0', '3.1416',
-                              '--duration', '60', '--record', str(bag_dir)], env=ros_env, stdout=log,
+                              '--duration', '3600', '--record', str(bag_dir)], env=ros_env, stdout=log,
                              stderr=subprocess.STDOUT, text=True)
     try:
         p = run(['param', 'get', 'controller', 'mode', *old], ros_env, timeout=120)
