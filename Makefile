@@ -1,5 +1,5 @@
 # rwpend — two commands on a fresh Debian 12 machine: `make demo` and `make test`.
-.PHONY: setup setup-browser demo test test-unit test-system test-network bench soak lab firmware clean distclean
+.PHONY: setup setup-browser setup-cluster demo test test-unit test-system test-network bench soak lab firmware clean distclean
 
 PY := .venv/bin/python
 
@@ -9,10 +9,14 @@ setup:
 setup-browser:   # setup + chromium and its driver (the console's page tests)
 	@bash tools/setup.sh --browser
 
+# setup + the Dask extra of ./rwpend sweep --scheduler (requirements-cluster.txt)
+setup-cluster:
+	@bash tools/setup.sh --cluster
+
 demo: setup
 	@./rwpend demo
 
-test: setup-browser
+test: setup-browser setup-cluster
 	@./rwpend exec python -m pytest
 
 test-unit: setup

@@ -13,7 +13,7 @@ ROOT=$PWD
 VENV=$ROOT/.venv
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
-PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_loop rwpend_bringup rwpend_lab rwpend_ident rwpend_console"
+PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_loop rwpend_bringup rwpend_lab rwpend_ident rwpend_console rwpend_sweep"
 
 # --firmware (make firmware): only the cross compiler of the rig's reference firmware (firmware/),
 # Debian's gcc-arm-none-eabi and its newlib. Nothing else of the set-up below.
@@ -32,6 +32,11 @@ if [ "${1:-}" = --firmware ]; then
   firmware_tools
   exit 0
 fi
+
+# --cluster (make setup-cluster, make test): also the Dask extra of ./rwpend sweep --scheduler
+# (requirements-cluster.txt)
+cluster=0
+for arg in "$@"; do if [ "$arg" = --cluster ]; then cluster=1; fi; done
 
 need_apt=""
 if [ "${1:-}" = --browser ]; then   # the console's page tests (make test): Debian's chromium + its driver
@@ -91,6 +96,11 @@ if ! stamp_ok "$VENV/.stamp-py" $setup_files "$VENV/.stamp-deps"; then
   for p in $PYPKGS; do [ -f "$p/setup.py" ] && args="$args -e ./$p"; done
   "$VENV/bin/python" -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation --config-settings editable_mode=compat $args
   touch "$VENV/.stamp-py"
+fi
+if [ "$cluster" = 1 ] && ! stamp_ok "$VENV/.stamp-cluster" requirements-cluster.txt "$VENV/.stamp-deps"; then
+  echo "setup: installing the cluster extra (requirements-cluster.txt: dask, distributed)"
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check -r requirements-cluster.txt
+  touch "$VENV/.stamp-cluster"
 fi
 "$VENV/bin/python" -c "import rclpy, rwpend_msgs.msg" \
   || { echo "setup: the environment does not import rclpy/rwpend_msgs" >&2; exit 1; }

@@ -23,6 +23,7 @@ Commands (``./rwpend COMMAND --help`` for each):
   identify  identify a rig (its rig YAML, a report), or --check RIG.yaml whether it still matches
   console   the lab console: the rig in a web browser (plots, gains, e-stop) + the Foxglove bridge
   bridge    the Foxglove WebSocket bridge alone (ws://127.0.0.1:8765)
+  sweep     robustness studies: many lockstep runs over a grid or Monte-Carlo axes (results, plots)
   exec      run any command inside the project's ROS environment (handled by ./rwpend)
 """
 from __future__ import annotations
@@ -1041,12 +1042,17 @@ def bridge_main(argv) -> int:
     return main(argv)
 
 
+def sweep_main(argv) -> int:
+    from rwpend_sweep.cli import main
+    return main(argv)
+
+
 COMMANDS = {
     'up': up_main, 'node': node_main, 'sim': sim_main, 'demo': demo_main, 'param': param_main, 'mode': mode_main,
     'tap': tap_main, 'estop': estop_main, 'graph': graph_main, 'gains': gains_main, 'record': record_main,
     'play': play_main, 'bag': bag_main, 'analyze': analyze_main, 'emulate': emulate_main,
     'bench': bench_main, 'soak': soak_main, 'lab': lab_main, 'identify': identify_main,
-    'console': console_main, 'bridge': bridge_main,
+    'console': console_main, 'bridge': bridge_main, 'sweep': sweep_main,
 }
 
 

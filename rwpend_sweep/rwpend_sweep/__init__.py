@@ -1,0 +1,1 @@
+"""Robustness studies of the rig: many closed-loop lockstep runs of the loop (./rwpend sweep)."""
