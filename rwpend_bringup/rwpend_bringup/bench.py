@@ -764,6 +764,9 @@ def summary_text(res: dict) -> str:
                          f"load {s.get('loadavg_before')}, other processes {_fmt(s.get('other_cpu_cores'), 2)} "
                          f"cores, steal {_fmt(s.get('host_steal_pct'), 1)} %"
                          + (f"; stopped: {s['stop_reasons']}" if s.get('stop_reasons') else ''))
+    if res.get('sweep'):
+        from rwpend_sweep.bench import bench_text
+        lines.append(bench_text(res['sweep']))
     d = res.get('decode')
     if d:
         lines.append(f"bag decode: {d['messages']} messages, read {_fmt(d.get('read_s'), 3)} s, decode "
@@ -804,6 +807,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--no-lockstep', action='store_true', help='skip the lockstep runs')
     p.add_argument('--no-decode', action='store_true', help='skip the bag decode benchmark')
     p.add_argument('--no-scale', action='store_true', help='skip the scale run (rigs per machine)')
+    p.add_argument('--no-sweep', action='store_true', help='skip the robustness-study speed (runs/s per core)')
     p.add_argument('--scale-max', type=int, default=8, metavar='N',
                    help='the scale run adds simulated rigs one by one up to N (default 8) or until '
                    'the late fraction at the plants passes 0.1 %%')
@@ -886,7 +890,7 @@ def main(argv=None) -> int:
                         'set': list(a.set), 'cpus': a.cpus, 'pin_realtime': {k: list(v) for k, v in pins.items()},
                         'cpu_latency_us': None if cpu_latency is None else int(cpu_latency),
                         'command': 'rwpend bench ' + ' '.join(sys.argv[1:] if argv is None else argv)},
-           'realtime': [], 'lockstep': [], 'decode': None, 'scale': None}
+           'realtime': [], 'lockstep': [], 'decode': None, 'scale': None, 'sweep': None}
     say = (lambda s: print(s, file=sys.stderr, flush=True))
     try:
         if not a.no_realtime:
@@ -910,6 +914,10 @@ def main(argv=None) -> int:
             # no pinning: n rigs share the CPUs as the scheduler places them
             res['scale'] = run_scale(out, periods[0], sdur, a.scale_max, env, a.scale_layout, echo,
                                      up_extra=up_extra, say=say)
+        if not a.no_sweep:
+            say('rwpend bench: robustness-study speed (./rwpend sweep, pure core) ...')
+            from rwpend_sweep.bench import bench as sweep_bench
+            res['sweep'] = sweep_bench()
         if not a.no_decode:
             bags = [Path(r['bag']) for r in res['realtime'] + res['lockstep']
                     if r.get('bag') and Path(r['bag']).is_dir()]
