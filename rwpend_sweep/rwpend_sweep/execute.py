@@ -210,7 +210,14 @@ def write_results(out: Path, rows: list[dict], columns: list[str]) -> None:
         import pyarrow.parquet as pq
     except ImportError:       # pragma: no cover - pyarrow is in requirements.txt
         return
-    table = pa.table({c: [r.get(c) for r in rows] for c in columns})
+    cols = {}
+    for c in columns:
+        vals = [r.get(c) for r in rows]
+        try:
+            cols[c] = pa.array(vals)
+        except (pa.ArrowInvalid, pa.ArrowTypeError):     # mixed kinds (a grid of text and numbers)
+            cols[c] = pa.array([None if v is None else str(v) for v in vals])
+    table = pa.table(cols)
     pq.write_table(table, out / 'results.parquet')
 
 

@@ -24,6 +24,16 @@ def _col(rows: list[dict], key: str) -> np.ndarray:
     return np.array([np.nan if r.get(key) is None else r.get(key) for r in rows], dtype=float)
 
 
+def _axis(rows: list[dict], key: str) -> tuple[np.ndarray, list | None]:
+    """An axis's values as numbers, and the category labels when they are not numbers (text,
+    booleans: plotted at 0, 1, 2 ...)."""
+    vals = [r.get(key) for r in rows]
+    if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
+        return np.array(vals, dtype=float), None
+    labels = list(dict.fromkeys(map(str, vals)))
+    return np.array([labels.index(str(v)) for v in vals], dtype=float), labels
+
+
 def _success(rows: list[dict]) -> np.ndarray:
     return np.array([bool(r.get('success')) for r in rows])
 
@@ -153,7 +163,7 @@ def plots(study: Study, rows: list[dict], out: Path) -> list[tuple[str, str]]:
     if len(axes) >= 2:
         a1, a2 = axes[0], axes[1]
         fig, ax = plt.subplots(figsize=(7, 5.5))
-        v1, v2 = _col(rows, a1.name), _col(rows, a2.name)
+        (v1, l1), (v2, l2) = _axis(rows, a1.name), _axis(rows, a2.name)
         if a1.is_grid and a2.is_grid and np.all(np.isfinite(v1)) and np.all(np.isfinite(v2)):
             xs, ys = sorted(set(v1)), sorted(set(v2))
             rate = np.full((len(ys), len(xs)), np.nan)
@@ -172,6 +182,10 @@ def plots(study: Study, rows: list[dict], out: Path) -> list[tuple[str, str]]:
             ax.legend(loc='best')
         if a1.name == 'initial.theta' and a2.name == 'initial.theta_dot':
             _draw_band(ax, v1)
+        if l1:
+            ax.set_xticks(range(len(l1)), l1)
+        if l2:
+            ax.set_yticks(range(len(l2)), l2)
         ax.set_xlabel(a1.name)
         ax.set_ylabel(a2.name)
         ax.set_title(f'success over {a1.name} x {a2.name}')
@@ -182,7 +196,7 @@ def plots(study: Study, rows: list[dict], out: Path) -> list[tuple[str, str]]:
                      + (' with the band (6.6) of the catch' if a1.name == 'initial.theta' and
                         a2.name == 'initial.theta_dot' else '')))
     for a in axes:
-        v = _col(rows, a.name)
+        v, labels = _axis(rows, a.name)
         if not np.any(np.isfinite(v)):
             continue
         fig, ax = plt.subplots(figsize=(6, 3.5))
@@ -190,6 +204,8 @@ def plots(study: Study, rows: list[dict], out: Path) -> list[tuple[str, str]]:
             xs = sorted(set(v[np.isfinite(v)]))
             ys = [ok[v == x].mean() for x in xs]
             ax.plot(xs, ys, 'o-')
+            if labels:
+                ax.set_xticks(range(len(labels)), labels)
         else:
             edges = np.unique(np.percentile(v, np.linspace(0, 100, 11)))
             if edges.size >= 2:

@@ -17,8 +17,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
-from typing import Optional
-
 import numpy as np
 
 from rwpend_control.supervisor import Controller
@@ -125,9 +123,6 @@ def build_loop(setup: RunSetup) -> Loop:
     return Loop(hw, gate, est, ControllerStage(ctrl, s.controller_id), s.model.sample_period)
 
 
-_LAWS: dict = {}
-
-
 def _law(law: tuple, rig):
     from rwpend_control.user_law import load_law
     # a fresh instance per run (a Law class keeps state), loaded from its file in this process
@@ -211,7 +206,3 @@ def run_many(items: list) -> list[tuple[int, dict]]:
 def samples_of(setup: RunSetup) -> Trace:
     """The per-sample trace of a run (for comparison with a bag of the same run)."""
     return simulate(setup, trace=True)[0]
-
-
-def null(x: Optional[float]) -> float:
-    return float('nan') if x is None else x
