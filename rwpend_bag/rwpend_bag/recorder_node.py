@@ -59,10 +59,12 @@ def qos_dict(q) -> dict:
 
 class Recorder(Node):
     def __init__(self, out_dir: str, topics: list[str] | None, record_all: bool,
-                 progress: str | None = None, sim_time: bool = False, direct: dict | None = None):
+                 progress: str | None = None, sim_time: bool = False, direct: dict | None = None,
+                 writer_process: bool = False):
         """``direct``: {topic: (type name, offered QoS list)} of topics whose messages are put
         into :attr:`writer` by their publishers in this process (rwpend_loop.host), not
-        subscribed."""
+        subscribed. ``writer_process``: the bag is written by a child process
+        (:class:`rwpend_bag.procwriter.ProcessBagWriter`), not by a thread of this one."""
         super().__init__('recorder')
         #: publisher of the progress (the newest /clock taken), None without --progress
         self.progress_pub = None
@@ -72,7 +74,12 @@ class Recorder(Node):
             self.progress_pub = self.create_publisher(Clock, progress, QOS_PROGRESS)
             self.progress_topic = self.progress_pub.topic_name
         self._clocks = 0
-        self.writer = ThreadedBagWriter(out_dir, order=SimTimeOrder() if sim_time else None)
+        order = SimTimeOrder() if sim_time else None
+        if writer_process:
+            from .procwriter import ProcessBagWriter
+            self.writer = ProcessBagWriter(out_dir, order=order)
+        else:
+            self.writer = ThreadedBagWriter(out_dir, order=order)
         self.wanted = set(topics or [])
         self.record_all = record_all
         self.subs: dict[str, object] = {}
@@ -172,7 +179,8 @@ class Recorder(Node):
 
 
 def print_report(report: dict, file=sys.stdout) -> None:
-    print(f"bag {report['bag']}: {report['message_count']} messages", file=file)
+    count = report.get('message_count')
+    print(f"bag {report['bag']}: {'an unknown number of' if count is None else count} messages", file=file)
     for name, d in report['topics'].items():
         print(f'  {name}: {d["text"]}', file=file)
     for name, why in report.get('skipped_topics', {}).items():

@@ -89,6 +89,16 @@ def qos_yaml(qos) -> str:
     return yaml.safe_dump(lst, default_flow_style=False, sort_keys=False).strip() if lst else '[]'
 
 
+def check_new_bag_path(path) -> Path:
+    """``path`` as a Path, if a bag may be written there (BagError otherwise)."""
+    p = Path(path)
+    if p.exists() and (not p.is_dir() or any(p.iterdir())):
+        raise BagError(f'{p} already exists (refusing to overwrite a bag)')
+    if not p.name:
+        raise BagError(f'bad bag path {path!r}')
+    return p
+
+
 class BagWriter:
     """Write one rosbag2 MCAP bag directory.
 
@@ -98,11 +108,7 @@ class BagWriter:
 
     def __init__(self, path, chunk_bytes: int = CHUNK_BYTES, chunk_seconds: float = CHUNK_SECONDS,
                  compression: str = 'zstd'):
-        self.path = Path(path)
-        if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
-            raise BagError(f'{self.path} already exists (refusing to overwrite a bag)')
-        if not self.path.name:
-            raise BagError(f'bad bag path {path!r}')
+        self.path = check_new_bag_path(path)
         self.path.mkdir(parents=True, exist_ok=True)
         self.file_name = f'{self.path.name}_0.mcap'
         self.mcap_path = self.path / self.file_name
@@ -255,40 +261,23 @@ class BagWriter:
         self.close()
 
 
-class ThreadedBagWriter:
-    """A BagWriter driven by its own thread: ``put()`` only enqueues (safe from any thread).
-
-    Messages go through ``order`` (default :class:`~rwpend_bag.logtime.ArrivalOrder`: logged at
-    the time given to ``put``; :class:`~rwpend_bag.logtime.SimTimeOrder` in lockstep), which
-    gives each its log time and the order to write it in. Also tracks ``seq`` per topic
-    (:class:`SeqTracker`, in the order the messages were put). ``close()`` drains the queue and
-    the order's buffer, writes the recording report (``recording_report.json`` and metadata
-    custom_data) and finalises the bag.
-    """
-
-    #: seconds between two looks at the queue when it is empty
-    poll_s = 0.002
+class BagSink:
+    """The writing end shared by :class:`ThreadedBagWriter` and :class:`ProcessBagWriter`:
+    items taken one at a time (``('msg', topic, data, time_ns)`` or ``('topic', name, type,
+    qos)``) go through ``order`` (default :class:`~rwpend_bag.logtime.ArrivalOrder`: logged at
+    the time given; :class:`~rwpend_bag.logtime.SimTimeOrder` in lockstep) into a
+    :class:`BagWriter`, the ``seq`` of every message tracked (:class:`SeqTracker`, in the order
+    the messages were put). A failing item is counted and the others are still written.
+    :meth:`finish` writes the recording report (``recording_report.json`` and metadata
+    custom_data) and finalises the bag."""
 
     def __init__(self, path, order: ArrivalOrder | SimTimeOrder | None = None, **kwargs):
         self.bag = BagWriter(path, **kwargs)
         self.order = ArrivalOrder() if order is None else order
         self.seqs = SeqTracker()
-        self._q: queue.SimpleQueue = queue.SimpleQueue()
         self.error: BaseException | None = None
         self.errors = 0
         self.max_queue = 0
-        self._thread = threading.Thread(target=self._run, name='bag-writer', daemon=True)
-        self._thread.start()
-
-    def add_topic(self, name: str, type_name: str, qos=None) -> None:
-        self._q.put(('topic', name, type_name, qos))
-
-    def put(self, topic: str, data: bytes, log_time_ns: int) -> None:
-        self._q.put(('msg', topic, data, log_time_ns))
-
-    def queue_size(self) -> int:
-        """Messages put and not yet taken by the writer thread."""
-        return self._q.qsize()
 
     def _failed(self, exc: BaseException) -> None:
         self.errors += 1
@@ -303,44 +292,27 @@ class ThreadedBagWriter:
             except BaseException as exc:  # noqa: BLE001 - keep writing the others; reported
                 self._failed(exc)
 
-    def _run(self) -> None:
-        q = self._q
-        bag = self.bag
-        poll = self.poll_s
-        while True:
-            try:
-                item = q.get_nowait()
-            except queue.Empty:
-                if not bag.closed:
-                    bag.maybe_flush()
-                # one wake-up per poll period, not one per message: at 1 kHz the recorder gets
-                # ~5000 messages/s, and waking this thread for each cost the recorder CPU and
-                # the loop's processes CPU time (PERFORMANCE.md)
-                time.sleep(poll)
-                continue
-            kind = item[0]
-            try:
-                if kind == 'msg':
-                    _, topic, data, t = item
-                    self.seqs.add(topic, data)
-                    self._write(self.order.push(topic, data, t))
-                elif kind == 'topic':
-                    bag.add_topic(item[1], item[2], item[3])
-                    self.seqs.register(item[1], bag.topics[item[1]]['type'])
-                    self.order.add_topic(item[1], bag.stamp_kind(item[1]))
-                elif kind == 'stop':
-                    self._write(self.order.flush())
-                    return
-            except BaseException as exc:  # noqa: BLE001 - keep writing the other topics
-                self._failed(exc)
-            n = q.qsize()
-            if n > self.max_queue:
-                self.max_queue = n
+    def take(self, item) -> None:
+        try:
+            if item[0] == 'msg':
+                _, topic, data, t = item
+                self.seqs.add(topic, data)
+                self._write(self.order.push(topic, data, t))
+            elif item[0] == 'topic':
+                self.bag.add_topic(item[1], item[2], item[3])
+                self.seqs.register(item[1], self.bag.topics[item[1]]['type'])
+                self.order.add_topic(item[1], self.bag.stamp_kind(item[1]))
+        except BaseException as exc:  # noqa: BLE001 - keep writing the other topics
+            self._failed(exc)
 
-    def close(self, extra: dict[str, Any] | None = None) -> dict[str, Any]:
-        """Drain, finalise; returns the recording report (dict)."""
-        self._q.put(('stop',))
-        self._thread.join()
+    def idle(self) -> None:
+        """Nothing waits: close a chunk that is old enough (a killed writer loses at most it)."""
+        if not self.bag.closed:
+            self.bag.maybe_flush()
+
+    def finish(self, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Write what the order still holds, finalise; returns the recording report (dict)."""
+        self._write(self.order.flush())
         report = self.seqs.report()
         report_doc = {'bag': str(self.bag.path), 'message_count': self.bag.message_count,
                       'topics': report, 'max_queue': self.max_queue,
@@ -356,3 +328,64 @@ class ThreadedBagWriter:
         (self.bag.path / 'recording_report.json').write_text(
             json.dumps(report_doc, indent=2, sort_keys=True) + '\n', encoding='utf-8')
         return report_doc
+
+
+class ThreadedBagWriter:
+    """A :class:`BagSink` driven by its own thread: ``put()`` only enqueues (safe from any
+    thread). ``close()`` drains the queue and the order's buffer and returns the recording
+    report."""
+
+    #: seconds between two looks at the queue when it is empty
+    poll_s = 0.002
+
+    def __init__(self, path, order: ArrivalOrder | SimTimeOrder | None = None, **kwargs):
+        self.sink = BagSink(path, order, **kwargs)
+        self.bag = self.sink.bag
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name='bag-writer', daemon=True)
+        self._thread.start()
+
+    @property
+    def error(self) -> BaseException | None:
+        return self.sink.error
+
+    @property
+    def errors(self) -> int:
+        return self.sink.errors
+
+    def add_topic(self, name: str, type_name: str, qos=None) -> None:
+        self._q.put(('topic', name, type_name, qos))
+
+    def put(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        self._q.put(('msg', topic, data, log_time_ns))
+
+    def queue_size(self) -> int:
+        """Messages put and not yet taken by the writer thread."""
+        return self._q.qsize()
+
+    def _run(self) -> None:
+        q = self._q
+        sink = self.sink
+        poll = self.poll_s
+        while True:
+            try:
+                item = q.get_nowait()
+            except queue.Empty:
+                sink.idle()
+                # one wake-up per poll period, not one per message: at 1 kHz the recorder gets
+                # ~5000 messages/s, and waking this thread for each cost the recorder CPU and
+                # the loop's processes CPU time (PERFORMANCE.md)
+                time.sleep(poll)
+                continue
+            if item[0] == 'stop':
+                return
+            sink.take(item)
+            n = q.qsize()
+            if n > sink.max_queue:
+                sink.max_queue = n
+
+    def close(self, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+        """Drain, finalise; returns the recording report (dict)."""
+        self._q.put(('stop',))
+        self._thread.join()
+        return self.sink.finish(extra)

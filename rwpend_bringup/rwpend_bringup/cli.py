@@ -482,21 +482,20 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
 
 def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
     """The simulator, estimator and controller of ``specs`` as nodes of one loop process
-    (rwpend_loop.host): the sample path in one thread. In lockstep the recorder is a node of that
-    process too (the bag written from the bytes the nodes publish, as fast as the loop runs); in
-    real time it stays a process of its own below the loop's priority (it can wait, the loop
-    cannot), and sample 0 waits for it as in the other layouts."""
+    (rwpend_loop.host): the sample path in one thread. The recorder is a node of that process
+    too: the bag is written from the bytes the nodes publish (no DDS hop), by a child process
+    of its own below the loop (rwpend_bag.procwriter)."""
     members = [s for s in specs if s.name in ('sim', 'estimator', 'controller')
                and s.module == NODE_MODULES[s.name]]
     sim = members[0]
     args = [s.name for s in members]
     rest = [s for s in specs if s not in members]
     rec = next((s for s in rest if s.name == 'recorder'), None)
-    if rec is not None and a.lockstep:
+    if rec is not None:
         rest.remove(rec)
         if 'start.state_subscribers' in sim.params:     # the recorder no longer subscribes to state
             sim.params['start.state_subscribers'] -= 1
-        args += ['--record', str(a.record), '--sim-time']
+        args += ['--record', str(a.record)] + (['--sim-time'] if a.lockstep else [])
         for key in ('start.encoders_subscribers', 'start.true_state_subscribers', 'lockstep_recorder_window'):
             sim.params.pop(key, None)
     host = NodeSpec('loop', 'rwpend_loop.host', args=args, node_params={s.name: s.params for s in members},

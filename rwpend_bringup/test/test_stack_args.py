@@ -295,11 +295,12 @@ def test_the_loop_layout_is_the_default_on_the_simulator(monkeypatch, tmp_path):
     assert 'lockstep_recorder_window' not in sim and 'start.encoders_subscribers' not in sim
     assert sim['start.state_subscribers'] == 1, 'the controller; the recorder is in the process'
     assert s['loop'].node_params['controller']['mode'] == 'auto'
-    # real time: the recorder a process of its own, below the loop; sample 0 waits for it
+    # real time: the recorder in the loop's process too (its bag written by a child process
+    # below the loop: rwpend_bag.procwriter), log times on the wall clock
     a, s, _ = defaults_of('--record', bag)
-    assert list(s) == ['loop', 'recorder'] and s['loop'].args == ['sim', 'estimator', 'controller']
-    assert s['loop'].node_params['sim']['start.encoders_subscribers'] == 2
-    assert s['recorder'].env['RWPEND_RT_PRIORITY'] == '40' and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
+    assert list(s) == ['loop'] and s['loop'].args == ['sim', 'estimator', 'controller', '--record', bag]
+    assert 'start.encoders_subscribers' not in s['loop'].node_params['sim']
+    assert s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
     # a split stack and the driver keep their layouts
     assert set(defaults_of('--only', 'sim')[1]) == {'sim'}
     with pytest.raises(ValueError, match='needs the simulator'):

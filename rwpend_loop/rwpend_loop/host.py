@@ -19,12 +19,14 @@ through the same gate, claimed) or at the encoders (no estimator either). In loc
 waits for that command (the simulator's ``lockstep_timeout``, then u = 0, counted).
 
 ``--record DIR``: the recorder of every topic runs in this process, as rosbag2's composable
-recorder does: what the hosted nodes publish goes into the bag as the bytes they published
-(no DDS hop, no second serialisation), ``/diagnostics`` included (so a lockstep bag is in a
-deterministic order: the nodes' reports come on the sample-time grid); every other topic
-(``/rosout``, ``/parameter_events``, ``estop`` ...) is subscribed over DDS as ``./rwpend record
---all`` does. /diagnostics of processes outside this one are therefore not in the bag.
-``--sim-time``: log times on the simulated clock (lockstep).
+recorder does: what the hosted nodes publish on the sample path goes into the bag as the bytes
+they published (no DDS hop, no second serialisation), written by a child process below the
+loop (:mod:`rwpend_bag.procwriter`); every other topic (``/rosout``, ``/parameter_events``,
+``estop`` ...) is subscribed over DDS as ``./rwpend record --all`` does. ``/diagnostics``: over
+DDS in real time (every process's reports), taken from the hosted nodes in lockstep (their
+reports on the sample-time grid: a deterministic bag; those of processes outside this one are
+then not in the bag). A sample-path topic goes to DDS only while DDS has subscribers there
+(:class:`RecordingPublisher`). ``--sim-time``: log times on the simulated clock (lockstep).
 
 Every callback of a hosted node (parameters, services, timers) runs holding the loop's lock
 (:class:`LoopLock`), and so does each sample: a parameter change applies between two samples.
@@ -70,7 +72,7 @@ class LoopLock:
 
 
 class RecordingPublisher:
-    """A hosted node's publisher in lockstep: its messages go into the in-process bag (``put``:
+    """A hosted node's publisher on the sample path: its messages go into the in-process bag (``put``:
     the same bytes, at the time they were published; the writer gives the log time) and to DDS
     only while DDS has subscribers (looked up every :data:`LOOK_EVERY` messages: a subscriber
     that comes, a console or ``ros2 topic echo``, gets the messages from then on). A publish
@@ -131,9 +133,10 @@ class Host:
         self.recorder = None
         if record:
             from rwpend_bag.recorder_node import Recorder
-            self.recorder = Recorder(record, None, True, sim_time=sim_time, direct=self._tap(self._put))
+            self.recorder = Recorder(record, None, True, sim_time=sim_time, direct=self._tap(self._put),
+                                     writer_process=True)
             self.nodes.append(self.recorder)
-        elif self.sim.lockstep:
+        else:
             self._tap(None)
         sim = self.sim
         #: lockstep: the simulator's ROS time from its own samples (rwpend_ros.simtime), as the
@@ -143,6 +146,17 @@ class Host:
         if sim.lockstep and sim.get_parameter('use_sim_time').value is True:
             from rwpend_ros.simtime import SampleTime
             self.sim_clock = SampleTime(sim)
+        from functools import partial
+
+        from rclpy.clock import ClockType
+        from rclpy.time import Time
+
+        from rwpend_ros import wire
+        self._ros_time = partial(Time, clock_type=ClockType.ROS_TIME)
+        self._pack_header = wire.pack_header
+        #: the hosted nodes' lockstep clocks, advanced together from each sample's stamp
+        self.sample_clocks = [c for c in (self.sim_clock, getattr(self.est, 'sample_time', None),
+                                          getattr(self.ctrl, 'sample_time', None)) if c is not None]
         self.h = sim.h
         self.period_ns = sim.period_ns
         self.loop = Loop(sim.hw, sim.gate, self.est.stage if self.est else None,
@@ -161,12 +175,15 @@ class Host:
     def _tap(self, put) -> dict:
         """Wrap every sample-path and status publisher of the hosted nodes in a
         :class:`RecordingPublisher` (``put``: into the bag, None: not recorded); returns
-        {topic: (type name, qos)} for the recorder."""
+        {topic: (type name, qos)} for the recorder. ``/diagnostics`` too in lockstep (its
+        reports then come on the sample-time grid: a deterministic bag); in real time the
+        recorder subscribes to it, so the reports of every process are in the bag."""
         from rwpend_bag.recorder_node import qos_dict
         topics = {}
-        for node, attrs in ((self.sim, ('pub_enc', 'pub_true', 'pub_clock', 'pub_diag')),
-                            (self.est, ('pub_state', 'pub_joints', 'pub_diag')),
-                            (self.ctrl, ('pub_cmd', 'pub_status', 'pub_diag'))):
+        diag = ('pub_diag',) if self.sim.lockstep else ()
+        for node, attrs in ((self.sim, ('pub_enc', 'pub_true', 'pub_clock', *diag)),
+                            (self.est, ('pub_state', 'pub_joints', *diag)),
+                            (self.ctrl, ('pub_cmd', 'pub_status', *diag))):
             if node is None:
                 continue
             for attr in attrs:
@@ -260,11 +277,12 @@ class Host:
 
     def _publish(self, tick, stamp_ns: int) -> None:
         """What sample k produced, for observers (after the command is written)."""
-        from rwpend_ros import wire
         sim = self.sim
         enc = sim.publish_sample(stamp_ns, tick.reading)
-        if self.sim_clock is not None:
-            self.sim_clock(enc)
+        if self.sample_clocks:
+            t = self._ros_time(nanoseconds=stamp_ns)
+            for clock in self.sample_clocks:
+                clock.set_time(stamp_ns, t)
         sim.steps += 1
         if self.est is not None:
             self._publish_loop_nodes(tick, stamp_ns, enc)
@@ -274,18 +292,14 @@ class Host:
                 node.publish_diagnostics()
 
     def _publish_loop_nodes(self, tick, stamp_ns: int, enc: bytes) -> None:
-        from rwpend_ros import wire
         sim = self.sim
-        for node in (self.est, self.ctrl):
-            if node is not None and node.sample_time is not None:
-                node.sample_time(enc)
         if tick.reading.seq > 0:
             self.est.note_command(tick.reading.seq - 1, tick.reading.u_prev)
         e = tick.estimate
         if e is None:
             return
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-        header = wire.pack_header(sec, nanosec, sim.frame_id)
+        header = self._pack_header(sec, nanosec, sim.frame_id)
         self.est.publish_estimate(header, tick.reading.seq, e)
         if self.ctrl is not None and tick.status is not None:
             self.ctrl.publish_result(header, tick.reading.seq, tick.u if tick.u is not None else 0.0,
