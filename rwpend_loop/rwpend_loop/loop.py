@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Optional
 
+from rwpend_control.supervisor import Status
 from rwpend_ros.gate import CommandGate
 from rwpend_sim.sim_core import Reading, SimHardware
 from rwpend_estimation.estimators import DuplicateSampleError, Estimate
@@ -70,7 +71,6 @@ class ControllerStage:
         self.law_errors = 0
 
     def control(self, t: float, seq: int, e: Estimate, now: float):
-        from rwpend_control.supervisor import Status
         ctrl = self.ctrl
         try:
             u, st = ctrl.update(t, seq, e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate, e.friction,

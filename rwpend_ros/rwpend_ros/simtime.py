@@ -54,12 +54,17 @@ class SampleTime:
             ns = wire.message_stamp_ns(data)
         except struct.error:
             return
+        if ns > self.last_ns:
+            self.set_time(ns, Time(nanoseconds=ns, clock_type=ClockType.ROS_TIME))
+
+    def set_time(self, ns: int, t: Time) -> None:
+        """Advance to ``t`` (= ``ns``, a ROS_TIME Time; the loop's process makes one for all its
+        nodes); an older time changes nothing."""
         if ns <= self.last_ns:
             return
         self.last_ns = ns
         if self._ts._clock_sub is not None:      # use_sim_time was set again at run time
             self._drop_clock_subscription()
-        t = Time(nanoseconds=ns, clock_type=ClockType.ROS_TIME)
         self._ts._last_time_set = t
         for clock in self._ts._associated_clocks:
             clock.set_ros_time_override(t)
