@@ -22,10 +22,19 @@ VOLATILE_ESTOP = textwrap.dedent('''
     rclpy.init()
     node = rclpy.create_node('user_estop')
     pub = node.create_publisher(Bool, '/rwpend/estop', 10)
+    # a volatile message reaches only the readers matched when it is sent: wait until the
+    # simulator's volatile reader is known and every known volatile reader is matched (a
+    # recorder's may match first; a transient-local reader never matches this publisher)
+    from rclpy.qos import DurabilityPolicy
+    def ready():
+        readers = [r for r in node.get_subscriptions_info_by_topic('/rwpend/estop')
+                   if r.qos_profile.durability == DurabilityPolicy.VOLATILE]
+        return (any(r.node_name == 'sim' for r in readers)
+                and pub.get_subscription_count() >= len(readers))
     end = time.monotonic() + 20
-    while pub.get_subscription_count() < 1 and time.monotonic() < end:
+    while not ready() and time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
-    print('matched', pub.get_subscription_count(), flush=True)
+    print('matched', pub.get_subscription_count(), 'ready' if ready() else 'NOT READY', flush=True)
     pub.publish(Bool(data=sys.argv[1] == 'true'))
     end = time.monotonic() + 1.0
     while time.monotonic() < end:
@@ -77,7 +86,7 @@ def test_estop_from_a_volatile_publisher_and_no_torque_after_the_clear_until_a_m
         wait_for(log, 'auto/catch', stack)
         time.sleep(1.0)
         p = rwpend(['exec', 'python', '-c', VOLATILE_ESTOP, 'true'], ros_env)
-        assert 'matched' in p.stdout
+        assert 'matched' in p.stdout and 'NOT READY' not in p.stdout, p.stdout
         wait_for(log, 'E-STOP raised', stack, 20)
         wait_for(log, 'e-stop raised: off', stack, 20)      # the controller switched off
         time.sleep(1.0)
