@@ -7,7 +7,7 @@ injected on a schedule:
 * ``stop``: SIGSTOP, then SIGCONT after the given time, of the process that holds the estimator
   (the loop layout, the default: the loop's process, simulator included; separate: the
   estimator; ``--composed control``: estimator + controller; ``--composed``: the whole stack) -- a stalled or preempted node, a laptop that sleeps;
-* ``stall-recorder``: the same for the recorder -- a slow disk;
+* ``stall-recorder``: the same for the process that writes the bag -- a slow disk;
 * ``drop``: a share of the UDP datagrams dropped (nftables, inside the run's own network
   namespace; skipped with the reason where that is not possible).
 
@@ -42,6 +42,11 @@ ESTIMATOR_PROCESS = {'loop': 'rwpend_loop.host sim estimator controller',
                      'separate': 'rwpend_estimation.estimator_node',
                      'control': 'rwpend_bringup.composed estimator controller',
                      'composed': 'rwpend_bringup.composed sim estimator controller'}
+
+#: the process writing the bag, by layout: the loop's process hands the bytes to a child of its
+#: own (rwpend_bag.procwriter, found by its process name); the others run ./rwpend record
+RECORDER_PROCESS = {'loop': 'rwpend-bag', 'separate': 'rwpend_bag.cli record',
+                    'control': 'rwpend_bag.cli record', 'composed': 'rwpend_bag.cli record'}
 
 
 @dataclass(frozen=True)
@@ -92,11 +97,20 @@ def cmdline(pid: int) -> str:
         return ''
 
 
+def comm(pid: int) -> str:
+    try:
+        return Path(f'/proc/{pid}/comm').read_text().strip()
+    except OSError:
+        return ''
+
+
 def find_process(root_pid: int, needle: str, timeout: float = 30.0) -> int | None:
+    """A descendant of ``root_pid`` whose command line contains ``needle``, or whose process
+    name is ``needle``."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         for pid in children(root_pid):
-            if needle in cmdline(pid):
+            if needle in cmdline(pid) or comm(pid) == needle:
                 return pid
         time.sleep(0.2)
     return None
@@ -158,7 +172,7 @@ def inject(fault: Fault, up_pid: int, layout: str, net: Netns, log) -> bool:
         time.sleep(fault.seconds)
         net.undrop()
         return True
-    needle = ESTIMATOR_PROCESS[layout] if fault.kind == 'stop' else 'rwpend_bag.cli record'
+    needle = ESTIMATOR_PROCESS[layout] if fault.kind == 'stop' else RECORDER_PROCESS[layout]
     pid = find_process(up_pid, needle, timeout=1.0)
     if pid is None:
         running = '; '.join(cmdline(c)[:80] for c in children(up_pid)) or 'none'
