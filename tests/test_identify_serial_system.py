@@ -46,17 +46,7 @@ def realtime_shortfall(status: int, text: str, out) -> str | None:
     return f'{100 * old_share:.0f} % of a run\'s commands came too late' if old_share > 0.1 else None
 
 
-#: an open defect, not a timing allowance (both serial tests): through the emulated heavy rig the
-#: fit of the free swing sometimes goes wrong and is not refused -- a = 69.8-69.9 and 62.3 against
-#: 78.17 (the swing fitted with an rms residual of 510 counts), or the energy time constant
-#: 3.5e25 s against 40 s with a = 77.92 -- on a loaded machine and on a quiet one alike; other
-#: runs pass (a = 78.1652 against 78.1654). Cause not found yet
-OPEN_SWING_DEFECT = ('OPEN: the fit of the free swing through the emulator sometimes goes wrong without '
-                     'being refused (a = 62-70 against 78.17, or an energy time constant of 3.5e25 s)')
-
-
 @pytest.mark.timeout(900)
-@pytest.mark.xfail(strict=False, reason=OPEN_SWING_DEFECT)
 def test_identify_through_the_emulated_rig(tmp_path, ros_env):
     out = tmp_path / 'id'
     status, lines, hands, link = run_with_hand(tmp_path, ros_env, ['identify', '--plant', 'serial:{link}',
@@ -90,7 +80,6 @@ def test_identify_through_the_emulated_rig(tmp_path, ros_env):
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.xfail(strict=False, reason=OPEN_SWING_DEFECT)
 def test_check_through_the_emulated_rig_says_its_own_rig_file_matches(tmp_path, ros_env):
     """``identify --check HEAVY --plant serial:`` on the emulator whose truth is HEAVY: the short
     re-measurement (7 runs) says it still matches, parameter by parameter."""
