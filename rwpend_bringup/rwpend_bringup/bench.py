@@ -134,8 +134,43 @@ def proc_cpu_s(pid: int) -> float | None:
     return (int(rest[11]) + int(rest[12])) / _clk_tck()   # fields 14, 15 of stat(5)
 
 
+def descendants(pid: int) -> list[int]:
+    """The processes started by ``pid`` and by them (/proc/PID/task/TID/children)."""
+    out, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            tasks = os.listdir(f'/proc/{p}/task')
+        except OSError:
+            continue
+        for t in tasks:
+            try:
+                with open(f'/proc/{p}/task/{t}/children') as f:
+                    kids = [int(k) for k in f.read().split()]
+            except (OSError, ValueError):
+                continue
+            out += kids
+            todo += kids
+    return out
+
+
+def process_name(pid: int) -> str:
+    try:
+        with open(f'/proc/{pid}/comm') as f:
+            return f.read().strip()
+    except OSError:
+        return str(pid)
+
+
 def cpu_snapshot(launcher: Launcher) -> dict[str, float | None]:
-    return {name: proc_cpu_s(p.pid) for name, p in launcher.procs.items()}
+    """CPU seconds of each process of the stack, and of the processes they started (named
+    ``PROCESS/NAME``, e.g. ``loop/rwpend-bag``, the loop's bag writer)."""
+    out = {}
+    for name, p in launcher.procs.items():
+        out[name] = proc_cpu_s(p.pid)
+        for d in descendants(p.pid):
+            out[f'{name}/{process_name(d)}'] = proc_cpu_s(d)
+    return out
 
 
 def all_cpu_snapshot() -> dict[int, float]:
@@ -289,13 +324,14 @@ def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
         t1, w1, c1 = time.monotonic(), time.time_ns(), cpu_snapshot(launcher)
         s1 = cpu_times()
         a1 = all_cpu_snapshot()
-        ours = {os.getpid(), *(p.pid for p in launcher.procs.values())}
+        ours = {os.getpid(), *(p.pid for p in launcher.procs.values()),
+                *(d for p in launcher.procs.values() for d in descendants(p.pid))}
     finally:
         codes = launcher.stop()
         cpu_req.close()
         log.close()
     window = t1 - t0
-    cpu = {n: (None if c0[n] is None or c1[n] is None else round((c1[n] - c0[n]) / window, 4))
+    cpu = {n: (None if c0[n] is None or c1.get(n) is None else round((c1[n] - c0[n]) / window, 4))
            for n in c0}
     res = {'layout': layout, 'h_s': h, 'rate_hz': round(1.0 / h), 'wall_s': round(window + SETTLE_S, 3),
            'stop_reason': reason, 'exit_codes': codes, 'bag': str(bag), 'log': str(out / f'{tag}.log'),
