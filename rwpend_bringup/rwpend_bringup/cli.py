@@ -596,6 +596,10 @@ def run_stack(a, specs, files, on_started=None) -> int:
                          interrupted=launcher.reason == 'signal')
 
 
+#: s to wait for the loop's bag writer to finish a bag its process did not close
+WRITER_FINISH_S = 30.0
+
+
 def judge_run(a, specs, exit_codes: dict, status: int, wall_s: float, interrupted: bool = False) -> int:
     """The exit status of ``up``: non-zero, with the reason, when the loop was dead at the end
     (a node's exit status :data:`rwpend_ros.health.EXIT_LOOP_DEAD`) or the bag is much shorter
@@ -613,6 +617,12 @@ def judge_run(a, specs, exit_codes: dict, status: int, wall_s: float, interrupte
     if not a.record or not names & {'recorder', 'loop'}:
         return status
     report_file = Path(a.record) / 'recording_report.json'
+    if 'loop' in names and not report_file.exists():
+        # the loop's bag writer is a process of its own: when the loop's process ended without
+        # closing the bag, the writer finishes it on its own (rwpend_bag.procwriter)
+        end = time.monotonic() + WRITER_FINISH_S
+        while not report_file.exists() and time.monotonic() < end:
+            time.sleep(0.1)
     try:
         report = json.loads(report_file.read_text())
     except (OSError, ValueError) as exc:
