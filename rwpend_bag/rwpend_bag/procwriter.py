@@ -7,7 +7,7 @@ the loop itself runs: in lockstep, 60 s of sample at 1 kHz took 15.2 s of wall t
 writer thread against 4.6 s without a recorder (PERFORMANCE.md, "The recorder of the loop's
 process"). Here the loop's process only appends ``(topic, bytes, time)`` to a queue; a sender
 thread hands batches of them to a child process through a pipe (one pickle per batch), and the
-child writes the bag, at ordinary priority below a real-time loop.
+child writes the bag, below a real-time loop (:func:`_below_the_loop`).
 
 Nothing handed over is lost:
 
@@ -45,8 +45,9 @@ START_TIMEOUT_S = 30.0
 CLOSE_TIMEOUT_S = 120.0
 #: the child's process name (/proc/PID/comm, at most 15 characters)
 PROCESS_NAME = 'rwpend-bag'
-#: the child's niceness above the loop's process
-NICENESS = 5
+#: a real-time loop's writer: this many SCHED_FIFO priorities below the loop (as ./rwpend up
+#: puts a recorder process of its own)
+PRIORITY_BELOW = 10
 DIED_WITHOUT_CLOSE = ('the recording process ended without closing the bag: the bag holds what it '
                       'handed over before it ended')
 
@@ -61,26 +62,27 @@ def _name_process() -> None:
         pass
 
 
-def _lower_priority() -> None:
-    """Below the loop: ordinary scheduling (a real-time policy is not inherited) and nicer."""
+def _below_the_loop() -> None:
+    """A real-time loop's writer runs :data:`PRIORITY_BELOW` SCHED_FIFO priorities below it (the
+    policy it inherited from the loop's process): above every ordinary process, so a busy
+    machine cannot starve it while the loop fills its queue, and below the loop, which cannot
+    wait. A loop at ordinary priority (lockstep) keeps its writer at ordinary priority."""
     try:
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        if os.sched_getscheduler(0) == os.SCHED_FIFO:
+            prio = os.sched_getparam(0).sched_priority
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, prio - PRIORITY_BELOW)))
     except (AttributeError, OSError):
-        pass
-    try:
-        os.nice(NICENESS)
-    except OSError:
         pass
 
 
 def serve(conn, path: str, order, kwargs: dict, detach: bool = True) -> None:
     """The child: open the bag, then take batches until told to stop (or the pipe closes).
-    ``detach``: ignore SIGINT/SIGTERM and run below the loop (False: a test's thread)."""
+    ``detach``: ignore SIGINT/SIGTERM, take a name and a priority (False: a test's thread)."""
     if detach:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         _name_process()
-        _lower_priority()
+        _below_the_loop()
     try:
         sink = BagSink(path, order, **kwargs)
     except BaseException as exc:  # noqa: BLE001 - told to the parent, which raises it
