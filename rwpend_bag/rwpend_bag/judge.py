@@ -28,6 +28,12 @@ What is judged, and from which topic (θ from hanging, upright = π; x = wrap(θ
   interval before it did not answer the previous sample (0 <= command_seq < seq - 1), and *at
   zero* when the command timeout held the motor at 0 (command_seq = -1).
 
+On the rig (the driver: no ``sim/true_state``) the plant's side is the device's own report,
+``applied`` (the command it held over each interval and the sample that command answered), and
+the angle is the estimator's (``state.theta``, by seq; the last estimate before a sample with
+none): :func:`plant_view` builds the same columns from them, and the verdict says so
+(:attr:`Verdict.source`).
+
 ``python -m rwpend_bag.judge BAG...`` prints the verdict of each bag, timing included.
 """
 from __future__ import annotations
@@ -39,11 +45,14 @@ from pathlib import Path
 import numpy as np
 
 LOOP_TYPES = {'PlantState': 'truth', 'StateEstimate': 'state', 'MotorCommand': 'command',
-              'EncoderCounts': 'encoders'}
+              'EncoderCounts': 'encoders', 'AppliedCommand': 'applied'}
 FIELDS = {'truth': ('seq', 'theta', 'u_commanded', 'command_seq', 'command_timeout'),
-          'state': ('seq', 'resyncs', 'missed'),
+          'state': ('seq', 'theta', 'resyncs', 'missed'),
           'command': ('seq', 'u'),
-          'encoders': ('seq',)}
+          'encoders': ('seq',),
+          'applied': ('seq', 'command_seq', 'u')}
+SOURCE_SIM = 'sim/true_state (the simulated plant)'
+SOURCE_RIG = 'applied (the device) and state.theta (the estimator)'
 
 
 def read_run(bag_dir: str | Path) -> dict:
@@ -116,7 +125,8 @@ class Verdict:
     gaps: dict = field(default_factory=dict)        # topic -> seen / reported
     unaccounted: list = field(default_factory=list)  # topics whose gaps the report does not list
     resyncs: int | None = None
-    samples: int = 0                  # plant samples in the bag (sim/true_state)
+    source: str = ''                  # what the plant's side was read from
+    samples: int = 0                  # plant samples in the bag (sim/true_state, or applied)
     timed_samples: int = 0            # of them from the first one a command answered on
     late_samples: int = 0             # the command held did not answer the previous sample
     zero_samples: int = 0             # the command timeout held the motor at 0
@@ -144,17 +154,39 @@ def _episodes(t, up, settle_s):
     return out
 
 
+def plant_view(run: dict) -> dict | None:
+    """The plant's columns of a rig run (module doc): ``applied`` of every sample with the
+    estimator's angle of the same seq (or the last one before it; NaN before the first), as
+    ``sim/true_state`` gives them on the simulator. None without ``applied`` or ``state.theta``."""
+    applied, state = run.get('applied'), run.get('state')
+    if applied is None or state is None or 'theta' not in state or 'command_seq' not in applied:
+        return None
+    seq = applied['seq'].astype(np.int64)
+    order = np.argsort(state['seq'], kind='stable')
+    s_seq, s_theta = state['seq'].astype(np.int64)[order], np.asarray(state['theta'], float)[order]
+    i = np.searchsorted(s_seq, seq, side='right') - 1
+    theta = np.where(i >= 0, s_theta[np.maximum(i, 0)], np.nan) if len(s_seq) else np.full(len(seq), np.nan)
+    return {'stamp': applied['stamp'], 'seq': seq, 'theta': theta, 'u_commanded': np.asarray(applied['u'], float),
+            'command_seq': applied['command_seq'].astype(np.int64)}
+
+
 def judge(run: dict, *, timeout_samples: int = 3, up: float = 0.3, fallen: float = 0.8,
           settle_s: float = 1.0, end_s: float = 5.0, tail_s: float = 0.5) -> Verdict:
     """The verdict of one run (see the module doc); ``run`` as :func:`read_run` returns it."""
     v = Verdict()
     truth = run.get('truth')
+    v.source = SOURCE_SIM
+    if truth is None:
+        truth = plant_view(run)
+        v.source = SOURCE_RIG
     if truth is None or len(truth['stamp']) < 2:
-        v.problems.append('no sim/true_state in the bag: nothing to judge')
+        v.source = ''
+        v.problems.append('neither sim/true_state nor applied with state in the bag: nothing to judge')
         return v
     t = truth['stamp'] - truth['stamp'][0]
     v.duration_s = float(t[-1])
     x = np.abs(wrap(truth['theta'] - np.pi))
+    x[np.isnan(x)] = np.pi                    # no estimate yet: not balanced
     eps = _episodes(t, x < up, settle_s)
     v.catches = len(eps)
     v.balanced_s = float(sum(t[b] - t[a] for a, b in eps))
@@ -191,7 +223,7 @@ def judge(run: dict, *, timeout_samples: int = 3, up: float = 0.3, fallen: float
             v.problems.append(f'{v.unsafe_samples} samples driven by a command {timeout_samples}+ samples '
                               f'old (first at {v.first_unsafe_s:.3f} s)')
     else:
-        v.problems.append('sim/true_state has no command_seq: the motor-zero rule cannot be judged')
+        v.problems.append(f'{v.source} has no command_seq: the motor-zero rule cannot be judged')
     t_end = truth['stamp'][-1]
     for key in ('state', 'command'):
         s = run.get(key)
@@ -203,7 +235,7 @@ def judge(run: dict, *, timeout_samples: int = 3, up: float = 0.3, fallen: float
     if state is not None and 'resyncs' in state and len(state['resyncs']):
         v.resyncs = int(state['resyncs'][-1])
     report_topics = run.get('report', {}).get('topics', {})
-    for key in ('truth', 'state', 'command', 'encoders'):
+    for key in ('truth', 'applied', 'state', 'command', 'encoders'):
         name = run['topics'].get(key)
         cols = run.get(key)
         if name is None or cols is None:
@@ -239,7 +271,7 @@ def main(argv=None) -> int:
             status = 2
             continue
         print(f'{bag}: {v.timing()}; falls {v.falls}, recoveries {v.recoveries}, '
-              f'alive at the end {v.alive_at_end}')
+              f'alive at the end {v.alive_at_end}' + (f' [from {v.source}]' if v.source == SOURCE_RIG else ''))
         for problem in v.problems:
             print(f'  problem: {problem}')
         if v.problems and status == 0:

@@ -99,3 +99,35 @@ def test_the_command_line_reads_bags_and_says_when_one_cannot_be_read(tmp_path, 
     from rwpend_bag.judge import main
     assert main([str(tmp_path / 'no-such-bag')]) == 2
     assert 'cannot be read' in capsys.readouterr().err
+
+
+def rig_run(theta, command_seq=None, u=None, state_every=1):
+    """A rig run: no sim/true_state; the device's applied commands and the estimator's angle."""
+    r = run(theta, u=u, command_seq=command_seq)
+    truth = r.pop('truth')
+    r['topics'].pop('truth')
+    r['applied'] = {'stamp': truth['stamp'], 'seq': truth['seq'], 'command_seq': truth['command_seq'],
+                    'u': truth['u_commanded']}
+    keep = np.arange(len(theta)) % state_every == 0
+    r['state'] = {'stamp': truth['stamp'][keep], 'seq': truth['seq'][keep],
+                  'theta': truth['theta'][keep], 'resyncs': np.zeros(keep.sum())}
+    r['command'] = {'stamp': truth['stamp'], 'seq': truth['seq']}
+    return r
+
+
+def test_a_rig_run_is_judged_from_the_device_and_the_estimate():
+    n = 10_000
+    cs = np.arange(n) - 1
+    cs[5000:5010] -= 1                      # 10 commands that came one sample late
+    v = judge(rig_run(np.full(n, np.pi + 0.05), command_seq=cs, state_every=3))
+    assert v.source.startswith('applied') and v.samples == n and v.alive_at_end
+    assert v.late_samples == 10 and v.zero_samples == 0 and v.unsafe_samples == 0
+    v = judge(rig_run(up_then(5000, 5000, 0.0)))
+    assert v.falls == 1 and not v.alive_at_end
+
+
+def test_a_bag_without_the_plant_side_says_so():
+    r = rig_run(np.full(100, np.pi))
+    del r['applied']
+    v = judge(r)
+    assert v.problems == ['neither sim/true_state nor applied with state in the bag: nothing to judge']
