@@ -2,8 +2,11 @@
 
 :class:`DeviceCore` is pure (no I/O, no clock of its own): the caller feeds the received bytes
 with :meth:`DeviceCore.receive` and calls :meth:`DeviceCore.tick` once per sample period with
-the current time; both return the bytes to transmit.  The emulator (emulator.py) runs it on a
-pseudo-terminal in real time; the tests run it with a fake clock.
+the current time; both return the bytes to transmit (or :meth:`DeviceCore.tick_begin` and
+:meth:`DeviceCore.tick_end` around the plant's step, as the firmware's C core is called).  The C
+core (``firmware/core``) is what ``./rwpend emulate`` runs; this statement of it is the one its
+host tests compare with frame for frame, the PC side's tests' fake device, and
+``./rwpend emulate --core python``.
 
 Per tick (sample k -> k+1):
 1. watchdog: enabled and more than ``watchdog_period`` since the last valid COMMAND (or since
@@ -73,6 +76,8 @@ class DeviceCore:
         self.counters = DeviceCounters()
         self.on_event = on_event
         self.last_trip: Optional[WatchdogEvent] = None
+        self._applied_sample = P.NO_SAMPLE    # the command sample held over the period being stepped
+        self.version = 'python ' + '.'.join(map(str, FW_VERSION))
 
     # -------------------------------------------------------------- helpers
     def _event(self, name: str, **data) -> None:
@@ -215,14 +220,28 @@ class DeviceCore:
 
     def tick(self, now: float) -> bytes:
         """One sample period: watchdog, integrate [t_k, t_k+1) with the held command, send SAMPLE k+1."""
+        u_milli = self.tick_begin(now)
+        self.plant.step(u_milli / P.U_SCALE)
+        return self.tick_end(now)
+
+    def tick_begin(self, now: float) -> int:
+        """The sample instant, as the firmware's core (rw_core_tick_begin): the watchdog, then the
+        command the motor gets over [t_k, t_k+1) (milli-units; 0 while disabled)."""
         self.check_watchdog(now)
-        u = self.held_command()
         self.u_applied_milli = self.u_milli if self.enabled else 0
-        applied_sample = self.cmd_sample if self.enabled else P.NO_SAMPLE
-        self.plant.step(u)
+        self._applied_sample = self.cmd_sample if self.enabled else P.NO_SAMPLE
+        return self.u_applied_milli
+
+    def tick_end(self, now: float, pendulum_counts: int | None = None, motor_counts: int | None = None) -> bytes:
+        """The plant stepped over the period: SAMPLE k+1 (rw_core_tick_end).  The counts are this
+        core's plant's (the emulator steps the same plant; the arguments are the HAL's)."""
         self.k = (self.k + 1) & 0xFFFFFFFF
         self.counters.samples += 1
-        return self.sample_frame(now, applied_sample)
+        return self.sample_frame(now, self._applied_sample)
+
+    def rx_stats(self) -> dict:
+        """What the receiver counted (the PC side's ParserStats names)."""
+        return self.parser.stats.as_dict()
 
     def sample_frame(self, now: float, applied_sample: Optional[int] = None) -> bytes:
         pc, mc = self.counts()

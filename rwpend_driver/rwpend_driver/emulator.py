@@ -1,11 +1,17 @@
 """Device emulator: the rig's microcontroller on a pseudo-terminal, driving the plant model in real time.
 
     ./rwpend emulate [--link PATH] [--h S] [--watchdog-ms N] [--theta RAD] [--rig FILE] [--hand] [--json]
-                     [--status-period S]
+                     [--status-period S] [--core firmware|python]
 
 Opens a pty (os.openpty), prints the slave device path (and makes PATH a symlink to it with
 ``--link``), then every h sends one SAMPLE frame and applies the latest valid COMMAND with
-zero-order hold (device logic: :mod:`rwpend_driver.device`).
+zero-order hold.  The device logic is the rig's firmware itself (``--core firmware``, the
+default): the portable core of ``firmware/core`` (C99, the code the STM32 board runs) built for
+this PC and called through ctypes (:mod:`rwpend_driver.firmware`); this module is its HAL -- the
+pty its UART, the plant model (:class:`rwpend_model.plant.Plant`) its motor and encoders, the
+sample clock this loop.  ``--core python`` runs the Python statement of the same contract
+(:mod:`rwpend_driver.device`) instead.  The ready, status and exit lines name the core
+(``fw``: the firmware's version, or ``python``).
 
 Signals emulate the cable: SIGUSR1 = unplug (the pty is closed, the link removed; the device
 keeps running, so its watchdog zeroes the motor), SIGUSR2 = replug (a new pty, the link
@@ -49,6 +55,7 @@ from rwpend_ros.trace import tracer
 
 from . import protocol as P
 from .device import DEFAULT_WATCHDOG_MS, DeviceCore
+from .firmware import FirmwareCore, FirmwareError
 from .link_health import Histogram
 
 
@@ -100,6 +107,10 @@ class Pty:
             pass
 
 
+#: the device logics the emulator can run (``--core``)
+CORES = ('firmware', 'python')
+
+
 def parse_args(argv):
     ap = argparse.ArgumentParser(prog='rwpend emulate', description=__doc__.split('\n\n')[0])
     ap.add_argument('--link', help='create this symlink to the pty slave (replaced atomically)')
@@ -121,6 +132,9 @@ def parse_args(argv):
     ap.add_argument('--h', type=float, default=None, metavar='S',
                     help='sample period, s (default: rig.sample_period of the rig YAML); the stack '
                          'must run with the same one (./rwpend up --h S): the driver checks it')
+    ap.add_argument('--core', choices=CORES, default='firmware',
+                    help='the device logic: the firmware\'s C core built for this PC (firmware, the default) '
+                         'or its Python statement (python, rwpend_driver.device)')
     ap.add_argument('--rt-priority', type=int, default=0, metavar='N',
                     help='SCHED_FIFO priority N (1-99) for the emulated firmware, as for the real '
                          'rig\'s microcontroller; nice -10 where not permitted (default 0: '
@@ -193,14 +207,22 @@ class EmulatorCounters:
 SENT_RING = 4096
 
 
+def make_core(name: str, rig, plant: Plant, watchdog_ms: int, on_event):
+    """The device logic ``name`` (CORES) for ``rig``; the emulator steps ``plant`` between the core's
+    tick_begin and tick_end.  FirmwareError when the firmware's core cannot be built or loaded."""
+    if name == 'python':
+        return DeviceCore(rig, plant, watchdog_ms=watchdog_ms, now=0.0, on_event=on_event)
+    return FirmwareCore(rig, watchdog_ms=watchdog_ms, on_event=on_event)
+
+
 class Emulator:
     def __init__(self, args) -> None:
         self.args = args
         # --rig is a complete file (checked in parse_args); --h overrides its sample period
         self.rig = load_rig(args.rig, overrides=None if args.h is None else {'rig.sample_period': args.h})
         self.t0 = time.monotonic()
-        self.core = DeviceCore(self.rig, Plant(self.rig, theta=args.theta), watchdog_ms=args.watchdog_ms,
-                               now=0.0, on_event=self.on_core_event)
+        self.plant = Plant(self.rig, theta=args.theta)      # the rig on the other side of the HAL
+        self.core = make_core(args.core, self.rig, self.plant, args.watchdog_ms, self.on_core_event)
         self.pty: Optional[Pty] = None
         self.host = False
         self.hands: queue.Queue = queue.Queue()
@@ -321,14 +343,14 @@ class Emulator:
             elif words[:1] == ['lift'] and 1 <= len(nums) <= 2:
                 angle, secs = math.radians(nums[0]), (nums[1:] or [0.0])[0]
             elif words[:1] == ['tap'] and len(nums) == 1:
-                self.core.plant.tap(nums[0])
+                self.plant.tap(nums[0])
                 self.emit('hand', action=line.strip())
                 return
             else:
                 raise ValueError('expected "steady [S]", "lift DEG [S]" or "tap DV"')
             if not 0.0 <= secs <= 60.0:
                 raise ValueError(f'hold time must be in 0..60 s, got {secs:g}')
-            self.core.plant.hold(angle)
+            self.plant.hold(angle)
         except ValueError as exc:
             self.emit('hand_refused', line=line.strip(), reason=str(exc))
             return
@@ -340,20 +362,20 @@ class Emulator:
         if self.holding is None:
             return
         angle, left = self.holding
-        self.core.plant.hold(angle)
+        self.plant.hold(angle)
         self.holding = (angle, left - 1) if left > 1 else None
         if self.holding is None:
             self.emit('hand', action='let go')
 
     def status(self) -> None:
-        c, s = self.core, self.core.plant.state
+        c, s = self.core, self.plant.state
         pc, mc = c.counts()
         e = self.counters
-        self.emit('status', sample=c.k, enabled=c.enabled, tripped=c.tripped, u_applied=c.u_applied_milli / P.U_SCALE,
+        self.emit('status', fw=c.version, sample=c.k, enabled=c.enabled, tripped=c.tripped, u_applied=c.u_applied_milli / P.U_SCALE,
                   cmd_sample=c.cmd_sample, commands=c.counters.commands, pendulum_counts=pc, motor_counts=mc,
                   theta=round(s.theta, 6), wheel_rate=round(s.wheel_rate, 4), rx_bad=c.rx_bad,
                   refused=c.counters.refused, ignored=c.counters.ignored_commands,
-                  watchdog_trips=c.counters.watchdog_trips, rx_stats=c.parser.stats.as_dict(),
+                  watchdog_trips=c.counters.watchdog_trips, rx_stats=c.rx_stats(),
                   overruns=e.overruns, stalls=e.stalls, max_late_ms=round(e.max_late_ms, 3),
                   dropped_tx=e.dropped_tx, unheard_tx=e.unheard_tx, host=self.host,
                   connected=self.pty is not None, late_commands=e.late_commands,
@@ -387,7 +409,12 @@ class Emulator:
         if self.pty is not None:
             self.set_host(self.pty.host_present())
         self.read()
-        data = self.core.tick(self.now())
+        # PROTOCOL.md "Order within a sample period": watchdog check -> the held command drives
+        # the plant over the period -> the encoders are read -> SAMPLE
+        now = self.now()
+        u_milli = self.core.tick_begin(now)
+        self.plant.step(u_milli / P.U_SCALE)
+        data = self.core.tick_end(now, *self.plant.counts())
         self.sent[self.core.k % SENT_RING] = time.monotonic()
         if self.trace is not None:
             self.trace('dev.tx', self.core.k)
@@ -414,12 +441,10 @@ class Emulator:
         self.t0 = start
         # every event's t is CLOCK_MONOTONIC - clock_origin (one clock for the host's processes)
         self.emit('ready', pty=self.pty.path, link=a.link or '', h=h, watchdog_ms=self.core.watchdog_ms,
-                  counts_per_rev=self.rig.counts_per_rev, clock_origin=start)
+                  counts_per_rev=self.rig.counts_per_rev, clock_origin=start, fw=self.core.version)
         k = 0
         next_status = a.status_period if a.status_period > 0 else math.inf
         unplug_at = a.unplug_after if a.unplug_after > 0 else math.inf
-        self.core.t0 = 0.0
-        self.core.last_command_time = 0.0
         try:
             while not self.stop:
                 unplug_at = self.cable(unplug_at)
@@ -445,7 +470,7 @@ class Emulator:
                 self.pty.close()
             if self.trace is not None:
                 self.trace.dump()
-            self.emit('exit', samples=self.core.counters.samples)
+            self.emit('exit', samples=self.core.counters.samples, fw=self.core.version)
             self.output.close()
         return 0
 
@@ -455,7 +480,12 @@ def main(argv=None) -> int:
     if args.rt_priority:
         from rwpend_ros.sched import apply_scheduling
         apply_scheduling({**os.environ, 'RWPEND_RT_PRIORITY': str(args.rt_priority)})
-    emu = Emulator(args)
+    try:
+        emu = Emulator(args)
+    except FirmwareError as exc:
+        print(f'rwpend emulate: {exc} (--core python runs the Python statement of the device instead)',
+              file=sys.stderr)
+        return 2
 
     def on_stop(signum, frame):
         emu.stop = True
