@@ -30,7 +30,7 @@ def pure_core(duration: float = 10.0) -> dict:
             'runs_per_s_per_core': 1.0 / cpu}
 
 
-def sweep_speed(runs: int = 6) -> dict:
+def sweep_speed(runs: int = 3) -> dict:
     from .build import prepare
     from .run import run_one
     from .spec import load_study
@@ -46,7 +46,7 @@ def sweep_speed(runs: int = 6) -> dict:
             'study_1000_runs_s_per_core': 1000 * mean}
 
 
-def bench(runs: int = 6) -> dict:
+def bench(runs: int = 3) -> dict:
     return {'pure_core': pure_core(), 'sweep': sweep_speed(runs)}
 
 
