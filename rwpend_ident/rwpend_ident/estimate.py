@@ -135,8 +135,9 @@ def fit_swing(rig, d, name: str = 'swing') -> FitResult:
     (:func:`swing_problem`): a bad swing gives no number."""
     dl, h = rig.count_angle, rig.sample_period
     pc = np.asarray(d.pc, float)
-    if np.any(np.isnan(pc)) or np.any(np.isnan(d.mc)):
-        raise IdentError(f'{name}: encoder samples missing in the recording')
+    missing = int(np.count_nonzero(np.isnan(pc) | np.isnan(np.asarray(d.mc, float))))
+    if missing:
+        raise IdentError(f'{name}: {missing} encoder samples missing in the recording')
     k_rel = release_index(pc, h, dl)
     tp, _ = M.turning_points(pc[k_rel:], np.arange(len(pc) - k_rel) * h)
     start = swing_start(tp)

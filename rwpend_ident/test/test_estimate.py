@@ -271,3 +271,12 @@ def test_swing_problem_says_what_is_not_measured():
     assert 'not measured' in E.swing_problem(swing_result(1.0, 0.0, 1e-5), 222)
     assert 'bound damping = 10' in E.swing_problem(swing_result(1.0, 10.0, 1e-3), 222)
     assert 'bound wp2 = 1e+04' in E.swing_problem(swing_result(1.0, 0.025, 1e-5, wp2=1e4), 222)
+
+
+def test_a_swing_with_samples_missing_says_how_many():
+    """As every run's check (records.commands): the count, which tells the real-time path's shortfall."""
+    th0 = math.radians(20)
+    d = run_data(lambda k, p: 0.0, 4000, theta=th0, wheel_angle=th0)
+    d.pc[1000:1204] = np.nan
+    with pytest.raises(IdentError, match='swing: 204 encoder samples missing in the recording'):
+        E.fit_swing(TRUTH, d)
