@@ -7,7 +7,7 @@ done / failed / runs per second / ETA); a study started again with the same ``--
 runs whose rows are there (``study.json`` must hold the same study). At the end the rows are
 written in run order to ``results.csv`` and ``results.parquet``.
 
-Engines: ``workers`` local processes (:class:`concurrent.futures.ProcessPoolExecutor`, fork:
+Engines: ``workers`` local processes (:class:`multiprocessing.pool.Pool`, fork:
 the workers inherit the imported modules), ``workers == 1`` in this process, or a
 ``distributed.Client`` for ``--scheduler tcp://HOST:8786`` (the ``distributed`` package, an
 optional extra: ``make setup-cluster``); the workers of a cluster must have the project's venv
@@ -93,20 +93,24 @@ def run_local(items: list, workers: int, on_row: Callable[[int, dict], None]) ->
                 on_row(i, row)
         return
     import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    ctx = mp.get_context('fork')
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        pending = {pool.submit(run_many, c) for c in chunks(items, CHUNK)}
-        try:
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for f in done:
-                    for i, row in f.result():
-                        on_row(i, row)
-        except BaseException:
-            for f in pending:
-                f.cancel()
-            raise
+    # the workers ignore Ctrl-C: the main process stops them (terminate) and keeps the rows
+    # written so far, so an interrupted study stops at once and resumes from them
+    pool = mp.get_context('fork').Pool(workers, initializer=_ignore_sigint)
+    try:
+        for rows in pool.imap_unordered(run_many, chunks(items, CHUNK)):
+            for i, row in rows:
+                on_row(i, row)
+        pool.close()
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.join()
+
+
+def _ignore_sigint() -> None:
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def run_dask(items: list, scheduler, on_row: Callable[[int, dict], None]) -> None:
