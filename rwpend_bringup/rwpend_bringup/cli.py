@@ -194,7 +194,8 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--no-controller', action='store_true', help='do not start the controller')
     p.add_argument('--rt-priority', type=int, default=None, metavar='N',
                    help='SCHED_FIFO priority N (1-99) for the loop processes (plant, estimator, '
-                   'controller), N-10 for the recorder (N in lockstep); falls back to nice -10 where '
+                   'controller), N-10 for the recorder or, in the loop layout, its bag writer (N in '
+                   'lockstep); falls back to nice -10 where '
                    f'real-time scheduling is not permitted; 0: ordinary scheduling. Default: '
                    f'{DEFAULT_RT_PRIORITY} in real time where permitted, 0 in lockstep (a lockstep run keeps '
                    'the CPUs busy: at real-time priority it would starve the machine)')
@@ -221,8 +222,9 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    help='nodes in one process on one executor: "all" (the default of a bare '
                    '--composed): plant (simulator), estimator and controller; "control": estimator '
                    'and controller, the plant (simulator or driver) in its own process, like '
-                   'ros2_control separates hardware from controllers. The recorder stays a process '
-                   'of its own; see PERFORMANCE.md')
+                   'ros2_control separates hardware from controllers; "loop" (the default on the '
+                   'simulator): the three in one process around one loop thread, the recorder too. '
+                   'Otherwise the recorder stays a process of its own; see PERFORMANCE.md')
     p.add_argument('--only', default=None, metavar='PROCESS[,PROCESS...]',
                    help='run only these processes of the stack, on this host (the others run on other '
                    'hosts of the network with the same up arguments): sim or driver, estimator, '
