@@ -166,8 +166,8 @@ def plant_view(run: dict) -> dict | None:
     s_seq, s_theta = state['seq'].astype(np.int64)[order], np.asarray(state['theta'], float)[order]
     i = np.searchsorted(s_seq, seq, side='right') - 1
     theta = np.where(i >= 0, s_theta[np.maximum(i, 0)], np.nan) if len(s_seq) else np.full(len(seq), np.nan)
-    return {'stamp': applied['stamp'], 'seq': seq, 'theta': theta, 'u_commanded': np.asarray(applied['u'], float),
-            'command_seq': applied['command_seq'].astype(np.int64)}
+    return {'stamp': applied['stamp'], 'seq': seq, 'theta': theta,
+            'u_commanded': np.asarray(applied['u'], float), 'command_seq': applied['command_seq'].astype(np.int64)}
 
 
 def judge(run: dict, *, timeout_samples: int = 3, up: float = 0.3, fallen: float = 0.8,
@@ -270,8 +270,9 @@ def main(argv=None) -> int:
             print(f'{bag}: cannot be read: {type(exc).__name__}: {exc}', file=sys.stderr)
             status = 2
             continue
+        rig = f' [from {v.source}]' if v.source == SOURCE_RIG else ''
         print(f'{bag}: {v.timing()}; falls {v.falls}, recoveries {v.recoveries}, '
-              f'alive at the end {v.alive_at_end}' + (f' [from {v.source}]' if v.source == SOURCE_RIG else ''))
+              f'alive at the end {v.alive_at_end}{rig}')
         for problem in v.problems:
             print(f'  problem: {problem}')
         if v.problems and status == 0:
