@@ -54,8 +54,8 @@ LOCKSTEP_RECORDER_WINDOW = 50
 #: ./rwpend up in real time: the loop's SCHED_FIFO priority where permitted (--rt-priority)
 DEFAULT_RT_PRIORITY = 50
 #: ./rwpend up without --composed: the layout per plant (PERFORMANCE.md, "Layouts")
-DEFAULT_LAYOUT = {'sim': 'loop', 'serial': 'control'}
-LAYOUT_TEXT = {'loop': 'the loop in one real-time thread of one process (simulator, estimator, controller '
+DEFAULT_LAYOUT = {'sim': 'loop', 'serial': 'loop'}
+LAYOUT_TEXT = {'loop': 'the loop in one real-time thread of one process (plant, estimator, controller '
                        'and the recorder as its nodes)',
                'none': 'separate processes (plant, estimator, controller)',
                'control': 'estimator + controller in one process, the plant in its own',
@@ -281,7 +281,7 @@ def choose_defaults(a) -> list[str]:
         # a stack split across hosts (--only sim / control / recorder): the plant in a process
         # of its own, the estimator and the controller in another
         layout = 'control'
-    if layout in ('all', 'loop') and plant != 'sim':
+    if layout == 'all' and plant != 'sim':
         layout = 'control' if given is None else layout
     a.composed = None if layout == 'none' else layout
     notes.append(f'layout: {LAYOUT_TEXT[layout]}' + ('' if given else f' (the default for --plant {plant}; '
@@ -422,9 +422,6 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     if composed == 'none':
         composed = None
     if composed == 'loop':
-        if plant != 'sim':
-            raise ValueError('--composed loop needs the simulator (--plant sim): the driver runs in '
-                             'its own process (--composed control keeps it there)')
         specs = loop_layout(specs, a)
     elif composed:
         if composed not in COMPOSITIONS:
@@ -483,11 +480,11 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
 
 
 def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
-    """The simulator, estimator and controller of ``specs`` as nodes of one loop process
-    (rwpend_loop.host): the sample path in one thread. The recorder is a node of that process
-    too: the bag is written from the bytes the nodes publish (no DDS hop), by a child process
-    of its own below the loop (rwpend_bag.procwriter)."""
-    members = [s for s in specs if s.name in ('sim', 'estimator', 'controller')
+    """The plant (simulator or driver), estimator and controller of ``specs`` as nodes of one
+    loop process (rwpend_loop.host, rwpend_loop.rig): the sample path in one thread. The
+    recorder is a node of that process too: the bag is written from the bytes the nodes publish
+    (no DDS hop), by a child process of its own below the loop (rwpend_bag.procwriter)."""
+    members = [s for s in specs if s.name in ('sim', 'driver', 'estimator', 'controller')
                and s.module == NODE_MODULES[s.name]]
     sim = members[0]
     args = [s.name for s in members]
@@ -498,8 +495,10 @@ def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
         if 'start.state_subscribers' in sim.params:     # the recorder no longer subscribes to state
             sim.params['start.state_subscribers'] -= 1
         args += ['--record', str(a.record)] + (['--sim-time'] if a.lockstep else [])
+        # (the driver counts the listeners of its process itself: DriverNode.listeners_here)
         for key in ('start.encoders_subscribers', 'start.true_state_subscribers', 'lockstep_recorder_window'):
-            sim.params.pop(key, None)
+            if sim.name == 'sim':
+                sim.params.pop(key, None)
     host = NodeSpec('loop', 'rwpend_loop.host', args=args, node_params={s.name: s.params for s in members},
                     stop_rank=min(s.stop_rank for s in members))
     return [host, *rest]

@@ -232,7 +232,7 @@ def test_defaults_lockstep_at_ordinary_priority_explicit_choices_kept(monkeypatc
     a, s, _ = defaults_of('--composed')
     assert a.composed == 'all' and 'stack' in s
     a, s, _ = defaults_of('--plant', 'serial:/dev/null')
-    assert a.composed == 'control' and 'driver' in s and 'control' in s
+    assert a.composed == 'loop' and list(s) == ['loop'] and s['loop'].args == ['driver', 'estimator', 'controller']
 
 
 def test_realtime_permitted_answers_without_changing_this_thread():
@@ -301,8 +301,23 @@ def test_the_loop_layout_is_the_default_on_the_simulator(monkeypatch, tmp_path):
     assert list(s) == ['loop'] and s['loop'].args == ['sim', 'estimator', 'controller', '--record', bag]
     assert 'start.encoders_subscribers' not in s['loop'].node_params['sim']
     assert s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
-    # a split stack and the driver keep their layouts
+    # a split stack keeps its layout
     assert set(defaults_of('--only', 'sim')[1]) == {'sim'}
+
+
+def test_the_loop_layout_is_the_default_on_the_rig(monkeypatch, tmp_path):
+    """The driver is the loop's plant (rwpend_loop.rig); it counts the listeners of its process
+    itself, so the recorder's start.encoders_subscribers stays."""
+    monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
+    bag = str(tmp_path / 'bag')
+    a, s, notes = defaults_of('--plant', 'serial:/dev/null', '--record', bag)
+    assert a.composed == 'loop' and list(s) == ['loop'] and s['loop'].module == 'rwpend_loop.host'
+    assert s['loop'].args == ['driver', 'estimator', 'controller', '--record', bag]
+    assert s['loop'].node_params['driver']['start.encoders_subscribers'] == 2
+    assert s['loop'].node_params['driver']['port'] == '/dev/null'
+    assert s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
+    # split across hosts, and the older layouts on request
+    assert set(defaults_of('--plant', 'serial:/dev/null', '--only', 'driver')[1]) == {'driver'}
+    assert defaults_of('--plant', 'serial:/dev/null', '--composed', 'control')[0].composed == 'control'
     with pytest.raises(ValueError, match='needs the simulator'):
-        defaults_of('--plant', 'serial:/dev/null', '--composed', 'loop')
-    assert defaults_of('--plant', 'serial:/dev/null')[0].composed == 'control'
+        defaults_of('--plant', 'serial:/dev/null', '--composed', 'all')

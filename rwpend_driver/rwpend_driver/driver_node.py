@@ -20,6 +20,12 @@ sample as wire bytes (rwpend_ros.wire) the moment it is read; the executor's thr
 EventsExecutor, like every node of the stack) takes the commands and writes each to the port
 at once. Neither ever waits for the port (rwpend_driver.port).
 
+Hosted in the loop's process (``rwpend_loop.rig``, the default layout of ``./rwpend up --plant
+serial:PORT``): the link thread is the loop's thread. Each SAMPLE frame, as it is read, goes
+through :attr:`loop_hook` -- estimate, control, the claim, the COMMAND frame written -- as plain
+calls holding the loop's lock, and only then is anything published. A command from the
+``command`` topic (a controller in another process) still comes through the same claim.
+
 ``/diagnostics``: the link's state and counters, and its health over the last window
 (rwpend_driver.link_health: samples lost or taken late, frames the device refused or could not send,
 frames the port could not take, watchdog trips, commands refused as old): WARN or ERROR with
@@ -31,6 +37,7 @@ All protocol and link logic lives in :mod:`rwpend_driver.link`, :mod:`rwpend_dri
 """
 from __future__ import annotations
 
+import contextlib
 import struct
 import sys
 import threading
@@ -103,8 +110,21 @@ PARAMS = [
 class DriverNode(LifecycleNode):
     """The rig's plant node: topics and parameters of the module doc; the link in DriverLink."""
 
-    def __init__(self) -> None:
+    def __init__(self, loop_lock=None, external_command: bool = True) -> None:
+        """``loop_lock``: the loop's lock when hosted in the loop's process (rwpend_loop.rig):
+        every callback that touches the claim, the e-stop or the link's command runs holding it,
+        as each sample does. ``external_command``: subscribe to ``command`` (False: the loop's
+        own controller is the only one, as the simulator's in the loop's process)."""
         super().__init__('driver')
+        self.loop_lock = loop_lock if loop_lock is not None else contextlib.nullcontext()
+        #: hosted: called by the link thread for each sample to publish, (seq, pc, mc, sample,
+        #: stamp_ns) -- the loop's sample (rwpend_loop.rig.RigHost); None: published here
+        self.loop_hook = None
+        #: hosted: subscribers of encoders in this process (the estimator, the recorder), which
+        #: start.encoders_subscribers counts but DDS does not
+        self.listeners_here = 0
+        #: hosted: told of every e-stop change, before the next sample (the controller follows it)
+        self.on_estop_change = None
         self.param_table = ParameterTable(self)
         p = self.param_table.declare(PARAMS)
         self.rig = declare_rig(self.param_table)
@@ -140,8 +160,8 @@ class DriverNode(LifecycleNode):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.malformed_commands = 0
         # wire bytes, once each and in order (rwpend_ros.order)
-        self.sub_cmd = local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
-                                          sender=wire.command_sender)
+        self.sub_cmd = (local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
+                                           sender=wire.command_sender) if external_command else None)
         #: one controller at a time (rwpend_ros.claim), judged on the link's sample counter
         try:
             self.claim = CommandClaim(p['claim_timeout_samples'])
@@ -298,10 +318,19 @@ class DriverNode(LifecycleNode):
         if self.first_published is None and not self._listeners_ready(seq):
             self.samples_before_start += 1
             return
-        header = wire.pack_header(*divmod(time.monotonic_ns() + self.wall_offset_ns, 1_000_000_000),
-                                  self.frame_id)
+        stamp_ns = time.monotonic_ns() + self.wall_offset_ns
+        if self.loop_hook is not None:
+            self.loop_hook(seq, pc, mc, s, stamp_ns)    # the loop's sample, then publish_sample
+            return
+        self.publish_sample(seq, pc, mc, s, stamp_ns)
+
+    def publish_sample(self, seq: int, pc: int, mc: int, s, stamp_ns: int) -> bytes:
+        """``encoders`` and ``applied`` of a sample (its header stamped ``stamp_ns``), and the
+        loop's health as the plant sees it; returns the header's bytes."""
+        header = wire.pack_header(*divmod(stamp_ns, 1_000_000_000), self.frame_id)
         if self.trace is not None:
             self.trace('drv.pub', seq)
+        link = self.link
         try:
             self.pub_enc.publish(wire.pack_encoders(header, seq, pc, mc))
             # after the encoders (the loop waits for those): what the motor was driven with
@@ -309,11 +338,12 @@ class DriverNode(LifecycleNode):
         except Exception:  # noqa: BLE001 - context shut down under the link thread
             self.stop.set()
         self._loop_event(self.loop.sample(False, link.timed_out))
+        return header
 
     def _listeners_ready(self, seq: int) -> bool:
         """Before the first published sample: True once ``start.encoders_subscribers`` listen to
         encoders (said in the log); a wait of more than 5 s is said once, with who is missing."""
-        need = self.p['start.encoders_subscribers']
+        need = max(0, self.p['start.encoders_subscribers'] - self.listeners_here)
         have = self.pub_enc.get_subscription_count()
         if have >= need:
             self.first_published = seq
@@ -336,7 +366,8 @@ class DriverNode(LifecycleNode):
             return
         if self.trace is not None:
             self.trace('drv.cmd', seq)
-        self._offer(source, seq, u, release)
+        with self.loop_lock:
+            self._offer(source, seq, u, release)
         self.diag_timer.sample_done()
 
     def _offer(self, source: int, seq: int, u: float, release: bool) -> bool:
@@ -400,12 +431,18 @@ class DriverNode(LifecycleNode):
 
     # ------------------------------------------------------------ e-stop
     def set_estop(self, on: bool) -> str:
+        with self.loop_lock:
+            return self._set_estop(on)
+
+    def _set_estop(self, on: bool) -> str:
         changed = self.estop != on
         self.estop = on
         link = self.link
         if link is not None and self.active:
             link.set_active(not on)     # off: zero command + ENABLE 0; on: ENABLE 1, zero until a command
         if changed:
+            if self.on_estop_change is not None:
+                self.on_estop_change(bool(on))
             self.pub_estop_state.publish(Bool(data=bool(on)))
             # one call site per severity: rclpy refuses a severity change at a call site
             if on:
@@ -433,7 +470,7 @@ class DriverNode(LifecycleNode):
             link = self.link
             values = {'lifecycle': self.lifecycle, 'port': self.cfg.port, 'estop': self.estop,
                       'estop_commands': self.estop_commands, 'malformed_commands': self.malformed_commands,
-                      'command_order': self.sub_cmd.summary(),
+                      'command_order': self.sub_cmd.summary() if self.sub_cmd is not None else 'loop',
                       'first_published_seq': -1 if self.first_published is None else self.first_published,
                       'samples_before_start': self.samples_before_start,
                       'link_thread_priority': self.link_thread_priority, **self.loop.values(),

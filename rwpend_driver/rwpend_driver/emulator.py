@@ -83,9 +83,14 @@ class Pty:
             os.replace(tmp, link)          # atomic: the path never points nowhere
 
     def poll(self, timeout: float) -> int:
-        """The master's events after at most ``timeout`` s (0: none)."""
+        """The master's events after at most ``timeout`` s (0: none). The wait is select()'s,
+        to the microsecond: poll() counts whole milliseconds, rounded up, so a wait for the
+        next sample instant 0.3 ms away lasted 1 ms -- the SAMPLE went out 0.7 ms late and the
+        answer to it came after the next instant (16 % of the samples through the emulator)."""
         try:
-            ev = self.poller.poll(max(0.0, timeout) * 1000.0)
+            if timeout > 0:
+                select.select([self.master], [], [], timeout)   # readable on data and on hang-up
+            ev = self.poller.poll(0)
         except InterruptedError:
             return 0
         return ev[0][1] if ev else 0

@@ -2,8 +2,8 @@
 book's manual steps asked of the student and detected from the encoders.
 
 For every :class:`rwpend_lab.experiment.Run` the stack of ``./rwpend up --plant serial:PORT
---record BAG --params FILE`` is started (up's defaults for a serial plant: the real-time priority
-where permitted, ``--composed control``), with the controller ``off`` when the run arms it later
+--record BAG --params FILE`` is started (up's defaults: the real-time priority where permitted,
+the loop's process with the driver as its plant, rwpend_loop.rig), with the controller ``off`` when the run arms it later
 (``Run.arm_after``).  A monitor node in this process takes the encoder samples and feeds them to
 :class:`rwpend_lab.manual.StepSequence`, which says when to print each prompt (``>>> ...``), when
 a step was seen, when to switch the controller to the run's mode (a ``set_parameters`` call, as
@@ -43,9 +43,12 @@ class Monitor:
     """The live part of one rig run: a ROS node in a thread of its own that feeds the encoder
     samples to the run's :class:`StepSequence`, prints its prompts and arms the controller."""
 
-    def __init__(self, steps: StepSequence, ns: str, mode: str, log, rt_priority: int = 0) -> None:
+    def __init__(self, steps: StepSequence, ns: str, mode: str, log, rt_priority: int = 0,
+                 recorder_in_loop: bool = True) -> None:
         self.steps, self.ns, self.mode, self._log = steps, ns, mode, log
         self.rt_priority = rt_priority
+        #: the loop's process records the loop's topics itself: nobody else to wait for
+        self.listeners = {} if recorder_in_loop else self.LISTENERS
         self.command_seq = -1          # the newest sample the controller answered
         #: the arming call and the run's end; the run's time starts when the mode came into force
         #: (the call answered), whatever sample this monitor had reached by then
@@ -100,14 +103,15 @@ class Monitor:
         for ev in self.steps.feed(seq, pc, mc):
             self.events.put(ev)
 
-    #: subscribers each loop topic has once the run is recorded: encoders (the estimator, the
-    #: recorder, this monitor), state (the controller, the recorder), command (the driver, the
-    #: recorder, this monitor), controller/status (the recorder)
+    #: subscribers each loop topic has once the run is recorded, in a layout whose recorder is a
+    #: process of its own: encoders (the estimator, the recorder, this monitor), state (the
+    #: controller, the recorder), command (the driver, the recorder, this monitor),
+    #: controller/status (the recorder)
     LISTENERS = {'encoders': 3, 'state': 2, 'command': 3, 'controller/status': 1}
 
     def _not_recorded(self, node, tool) -> str:
         """'' once every loop topic has its subscribers (the recorder among them), else which not."""
-        short = [f'{t} has {have} of {need} subscribers' for t, need in self.LISTENERS.items()
+        short = [f'{t} has {have} of {need} subscribers' for t, need in self.listeners.items()
                  if (have := node.count_subscribers(tool.fqn(t))) < need]
         return '; '.join(short)
 
@@ -268,7 +272,7 @@ def record_run(run: Run, rig, out: Path, plant: str, sets=(), extra=(), log=prin
                              timeout_s=PROMPT_TIMEOUT_S)
     except ValueError as exc:
         raise error(str(exc)) from None
-    monitor = Monitor(steps, ua.ns, run.mode, log, ua.rt_priority or 0)
+    monitor = Monitor(steps, ua.ns, run.mode, log, ua.rt_priority or 0, recorder_in_loop=ua.composed == 'loop')
     try:
         monitor.start()
     except LabError as exc:

@@ -1,6 +1,6 @@
 """The loop's process: the plant, estimator and controller nodes hosted around one loop thread.
 
-    python -m rwpend_loop.host [sim] [estimator] [controller] [--record DIR] [--sim-time]
+    python -m rwpend_loop.host [sim|driver] [estimator] [controller] [--record DIR] [--sim-time]
                                --ros-args -r __ns:=/rwpend --params-file ...
 
 Like ros2_control's controller manager: the nodes ``sim``, ``estimator`` and ``controller`` are
@@ -41,6 +41,8 @@ import time
 
 #: the hosted nodes, in the order they are built (the plant first: its gate serves the others)
 NODES = ('sim', 'estimator', 'controller')
+#: the plants, one of which is hosted: the simulator, or the serial link's driver (rwpend_loop.rig)
+PLANTS = ('sim', 'driver')
 #: lockstep: the bag writer's queue length at which the loop waits for it (messages)
 RECORD_QUEUE_LIMIT = 20_000
 
@@ -109,22 +111,52 @@ def wire_bytes(data) -> bytes:
     return bytes(data) + b'\0' * pad if pad else bytes(data)
 
 
+def build_loop_nodes(names: list[str], lock: LoopLock) -> tuple:
+    """The hosted ``estimator`` and ``controller`` nodes of ``names`` (None where left out),
+    their callbacks under ``lock``; the estimator with its loop stage."""
+    from rwpend_loop.loop import EstimatorStage
+    est = ctrl = None
+    if 'estimator' in names:
+        from rwpend_estimation.estimator_node import EstimatorNode
+        est = EstimatorNode(bus=lock, hosted=True)
+        est.stage = EstimatorStage(est.est)
+    if 'controller' in names:
+        from rwpend_control.controller_node import ControllerNode
+        ctrl = ControllerNode(bus=lock, hosted=True)
+    return est, ctrl
+
+
+def tap_publishers(taps, put) -> dict:
+    """Wrap the publishers ``taps`` = [(node or None, attribute names)] of hosted nodes in a
+    :class:`RecordingPublisher` (``put``: into the bag, None: not recorded); returns {topic:
+    (type name, offered QoS)} for the recorder."""
+    from rwpend_bag.recorder_node import qos_dict
+    topics = {}
+    for node, attrs in taps:
+        if node is None:
+            continue
+        for attr in attrs:
+            pub = getattr(node, attr, None)
+            if pub is None:
+                continue
+            inner = getattr(pub, 'pub', pub)          # a LocalPublisher's rclpy publisher
+            msg_type = inner.msg_type
+            type_name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
+            topics[inner.topic_name] = (type_name, [qos_dict(inner.qos_profile)])
+            setattr(node, attr, RecordingPublisher(inner, put))
+    return topics
+
+
 class Host:
-    """The nodes of this process and the loop that runs through them."""
+    """The nodes of this process and the loop that runs through them (the simulator's; the
+    rig's: :class:`rwpend_loop.rig.RigHost`)."""
 
     def __init__(self, names: list[str], record: str | None, sim_time: bool) -> None:
         from rwpend_sim.sim_node import SimNode
-        from rwpend_loop.loop import ControllerStage, EstimatorStage, Loop
+        from rwpend_loop.loop import ControllerStage, Loop
         self.lock = LoopLock()
         self.sim = SimNode(bus=self.lock, hosted=True, external_command='controller' not in names)
-        self.est = self.ctrl = None
-        if 'estimator' in names:
-            from rwpend_estimation.estimator_node import EstimatorNode
-            self.est = EstimatorNode(bus=self.lock, hosted=True)
-            self.est.stage = EstimatorStage(self.est.est)
-        if 'controller' in names:
-            from rwpend_control.controller_node import ControllerNode
-            self.ctrl = ControllerNode(bus=self.lock, hosted=True)
+        self.est, self.ctrl = build_loop_nodes(names, self.lock)
         self.nodes = [n for n in (self.sim, self.est, self.ctrl) if n is not None]
         if self.ctrl is not None:
             from std_msgs.msg import Bool
@@ -173,30 +205,14 @@ class Host:
         self.thread = threading.Thread(target=self._run, name='loop', daemon=True)
 
     def _tap(self, put) -> dict:
-        """Wrap every sample-path and status publisher of the hosted nodes in a
-        :class:`RecordingPublisher` (``put``: into the bag, None: not recorded); returns
-        {topic: (type name, qos)} for the recorder. ``/diagnostics`` too in lockstep (its
-        reports then come on the sample-time grid: a deterministic bag); in real time the
-        recorder subscribes to it, so the reports of every process are in the bag."""
-        from rwpend_bag.recorder_node import qos_dict
-        topics = {}
+        """The sample-path and status publishers of the hosted nodes into the bag
+        (:func:`tap_publishers`); ``/diagnostics`` too in lockstep (its reports then come on the
+        sample-time grid: a deterministic bag); in real time the recorder subscribes to it, so
+        the reports of every process are in the bag."""
         diag = ('pub_diag',) if self.sim.lockstep else ()
-        for node, attrs in ((self.sim, ('pub_enc', 'pub_true', 'pub_clock', *diag)),
-                            (self.est, ('pub_state', 'pub_joints', *diag)),
-                            (self.ctrl, ('pub_cmd', 'pub_status', *diag))):
-            if node is None:
-                continue
-            for attr in attrs:
-                pub = getattr(node, attr, None)
-                if pub is None:
-                    continue
-                inner = getattr(pub, 'pub', pub)          # a LocalPublisher's rclpy publisher
-                name = inner.topic_name
-                msg_type = inner.msg_type
-                type_name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
-                topics[name] = (type_name, [qos_dict(inner.qos_profile)])
-                setattr(node, attr, RecordingPublisher(inner, put))
-        return topics
+        return tap_publishers([(self.sim, ('pub_enc', 'pub_true', 'pub_clock', *diag)),
+                               (self.est, ('pub_state', 'pub_joints', *diag)),
+                               (self.ctrl, ('pub_cmd', 'pub_status', *diag))], put)
 
     def _put(self, topic: str, data: bytes, now_ns: int) -> None:
         self.recorder.writer.put(topic, data, now_ns)
@@ -366,6 +382,9 @@ class Host:
         if self.thread.is_alive():
             self.thread.join(timeout=2.0)
 
+    def exit_status(self) -> int:
+        return self.sim.exit_status()
+
 
 def parse_args(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     ros = []
@@ -373,13 +392,19 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
         i = argv.index('--ros-args')
         argv, ros = argv[:i], argv[i:]
     p = argparse.ArgumentParser(prog='rwpend_loop.host', description=__doc__.split('\n\n')[0])
-    p.add_argument('nodes', nargs='*', default=list(NODES), help='the hosted nodes (sim first)')
+    p.add_argument('nodes', nargs='*', default=list(NODES), help='the hosted nodes (the plant, sim or '
+                   'driver, first)')
     p.add_argument('--record', metavar='DIR', help='record every topic into the bag DIR, in this process')
     p.add_argument('--sim-time', action='store_true', help='log times on the simulated clock (lockstep)')
     a = p.parse_args(argv)
-    bad = [n for n in a.nodes if n not in NODES]
-    if bad or len(set(a.nodes)) != len(a.nodes) or 'sim' not in a.nodes:
-        p.error(f'nodes must be distinct names of {", ".join(NODES)} with sim, got {" ".join(a.nodes)}')
+    known = PLANTS + NODES[1:]
+    bad = [n for n in a.nodes if n not in known]
+    plants = [n for n in a.nodes if n in PLANTS]
+    if bad or len(set(a.nodes)) != len(a.nodes) or len(plants) != 1:
+        p.error(f'nodes must be distinct names of {", ".join(known)} with one plant (sim or driver), '
+                f'got {" ".join(a.nodes)}')
+    if 'driver' in a.nodes and a.sim_time:
+        p.error('--sim-time needs the simulator: the rig runs in real time')
     if 'controller' in a.nodes and 'estimator' not in a.nodes:
         p.error('a hosted controller needs the hosted estimator (the loop runs estimator -> controller)')
     return a, ros
@@ -408,7 +433,11 @@ def main(argv=None) -> int:
     host = None
     status = 0
     try:
-        host = Host(a.nodes, a.record, a.sim_time)
+        if 'driver' in a.nodes:
+            from rwpend_loop.rig import RigHost
+            host = RigHost(a.nodes, a.record)
+        else:
+            host = Host(a.nodes, a.record, a.sim_time)
         apply_thread_priority(host.nodes)       # before the loop's thread starts: it inherits it
         executor = make_executor()
         for node in host.nodes:
@@ -434,7 +463,7 @@ def main(argv=None) -> int:
         for sig, h in old.items():
             signal.signal(sig, h)
     if status == 0 and host is not None:
-        status = host.sim.exit_status()
+        status = host.exit_status()
     return status
 
 
