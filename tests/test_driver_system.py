@@ -74,7 +74,7 @@ def _env():
     env['ROS_DOMAIN_ID'] = str(test_domain_id())
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['PYTHONUNBUFFERED'] = '1'
-    # as on the rig (README): the driver and the commanding node at real-time priority where
+    # as on the rig (docs/rig.md): the driver and the commanding node at real-time priority where
     # permitted -- the driver refuses commands 3 or more samples old
     env['RWPEND_RT_PRIORITY'] = '50'
     return env

@@ -897,7 +897,7 @@ DRIVER_CMD_NODE = textwrap.dedent('''
 def test_driver_estop_zeroes_the_device_until_cleared(tmp_path, ros_env):
     """Through the serial driver: the emulated device's applied torque is 0 and its amplifier
     off from the e-stop to the clear, while a node keeps commanding u = 2."""
-    P = Procs(tmp_path, {**ros_env, 'RWPEND_RT_PRIORITY': '50'})     # as on the rig (README)
+    P = Procs(tmp_path, {**ros_env, 'RWPEND_RT_PRIORITY': '50'})     # as on the rig (docs/rig.md)
     link = str(tmp_path / 'rig')
     try:
         P.start('emulator', [PY, '-u', '-m', 'rwpend_driver.emulator', '--link', link, '--json',

@@ -14,7 +14,7 @@ Log times (:mod:`rwpend_bag.logtime`), in log-time order in the file whatever ha
   deterministic order (:class:`rwpend_bag.logtime.SimTimeOrder`).
 
 ``progress`` (``rwpend record --progress TOPIC``, set by ``./rwpend up --lockstep --record``): every
-:data:`rwpend_ros.RECORDER_PROGRESS_EVERY` ``/clock`` messages taken (handed to the bag
+:data:`rwpend_ros.qos.RECORDER_PROGRESS_EVERY` ``/clock`` messages taken (handed to the bag
 writer, whose queue loses nothing), that ``/clock`` is published on TOPIC; a lockstep simulator
 keeps within its ``lockstep_recorder_window`` of it, so a recorder that falls behind slows the
 run down instead of losing messages.
@@ -196,7 +196,7 @@ def run_recorder(out_dir: str, topics: list[str] | None, record_all: bool,
                  progress: str | None = None, sim_time: bool = False) -> int:
     """The ``record`` process: record until SIGINT/SIGTERM, then drain (:meth:`Recorder.drain`)
     and close the bag. rclpy's own signal handlers are off, so the context stays usable while
-    draining. Priority from the environment (``rwpend_ros.apply_scheduling``)."""
+    draining. Priority from the environment (``rwpend_ros.sched.apply_scheduling``)."""
     import signal
     import threading
 

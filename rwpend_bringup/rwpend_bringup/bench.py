@@ -2,7 +2,8 @@
 
 What it runs (every run is the full stack started by :class:`rwpend_bringup.launch.Launcher`
 from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` runs, with
-``--rt-priority 50 --cpu-latency 0`` unless told otherwise; PERFORMANCE.md 1. and 13.):
+``--rt-priority 50 --cpu-latency 0`` unless told otherwise; PERFORMANCE.md, "What each mechanism
+buys"):
 
 1. **real time**, for each sample period h (default 1 ms and 0.5 ms) and each layout (separate
    processes; ``control``: estimator and controller in one process, ``up --composed control``;
@@ -74,14 +75,15 @@ LAYOUT_ARGS = {'loop': ['--composed', 'loop'], 'separate': ['--composed', 'none'
                'control': ['--composed', 'control'], 'composed': ['--composed', 'all']}
 #: ``--pin`` of the real-time runs by default (when CPUs 0 and 1 are usable): separate processes
 #: only, the simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free.
-#: Measured (PERFORMANCE.md, 20.): lower median latency in 10 of 10 interleaved pairs, lower p99
-#: in 9 of 10; no gain for the control layout; lockstep not pinned (not measured)
+#: Measured (PERFORMANCE.md, "What each mechanism buys"): lower median latency in 10 of 10
+#: interleaved pairs, lower p99 in 9 of 10; no gain for the control layout; lockstep not pinned
+#: (not measured)
 DEFAULT_PINS = {'separate': ('sim=0', 'estimator=0', 'controller=1')}
 SETTLE_S = 4.0            # wall seconds after start before the measured window opens
 #: a lockstep run is stopped after this many wall seconds per simulated second (plus
 #: SETTLE_S + 30): the slowest ever measured ran at ~1x; once, a run froze with Fast DDS's async
 #: writer thread spinning at 100 % in two processes (rmw_fastrtps#666 describes such a loop),
-#: and the bench must not wait ten minutes for it (PERFORMANCE.md, 14.)
+#: and the bench must not wait ten minutes for it (PERFORMANCE.md, "What is measured")
 LOCKSTEP_WALL_PER_SIM_S = 10.0
 
 

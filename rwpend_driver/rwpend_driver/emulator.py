@@ -414,8 +414,8 @@ class Emulator:
         if self.pty is not None:
             self.set_host(self.pty.host_present())
         self.read()
-        # PROTOCOL.md "Order within a sample period": watchdog check -> the held command drives
-        # the plant over the period -> the encoders are read -> SAMPLE
+        # PROTOCOL.md, "Device behaviour", the order within a sample period: watchdog check ->
+        # the held command drives the plant over the period -> the encoders are read -> SAMPLE
         now = self.now()
         u_milli = self.core.tick_begin(now)
         self.plant.step(u_milli / P.U_SCALE)

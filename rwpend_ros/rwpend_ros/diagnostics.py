@@ -11,7 +11,7 @@ def publish_diagnostic(pub, stamp_ns: int, name: str, hardware_id: str, level, m
     """One DiagnosticStatus (``level``: ``DiagnosticStatus.OK`` / ``WARN`` / ``ERROR`` / ``STALE``
     or 0-3; ``values``: key-values, each turned into text with ``str()``) in a DiagnosticArray
     stamped ``stamp_ns``, published as wire bytes (:func:`rwpend_ros.wire.pack_diagnostic_array`),
-    without building the message as rclpy objects (PERFORMANCE.md, 19.)."""
+    without building the message as rclpy objects (PERFORMANCE.md, "What each mechanism buys")."""
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     pub.publish(wire.pack_diagnostic_array(sec, nanosec, [(level, name, message, hardware_id, values)]))
 

@@ -6,7 +6,7 @@ Why: rclpy has no intra-process communication. Between two nodes of one process 
 through Fast DDS (writer, reader, listener, event queue) and the executor takes it after the
 publisher's callback has returned: ~75-130 us per hop at 1 kHz on the project's machine, about
 what a hop between processes costs. Through the bus the subscriber's callback runs inside
-``publish()`` (PERFORMANCE.md, "Composition and the in-process bus").
+``publish()`` (PERFORMANCE.md, "What each mechanism buys").
 
 One switch: ``RWPEND_INTRA_PROCESS=0`` (the composer then creates no bus and every message goes
 through DDS). A process of one node has no bus.

@@ -70,8 +70,8 @@ def estop_subscriptions(node, callback) -> list:
 
 class SlackTimer:
     """A periodic timer of a loop node whose work must not delay a sample (diagnostics: 0.35-0.6
-    ms of CPU holding the GIL on the project's machine; PERFORMANCE.md, "Housekeeping"). While
-    the loop runs (:meth:`sample_done` was called since the last tick) the tick only marks the
+    ms of CPU holding the GIL on the project's machine; PERFORMANCE.md, "What each mechanism buys").
+    While the loop runs (:meth:`sample_done` was called since the last tick) the tick only marks the
     work due, and the next per-sample callback runs it right after its sample is out -- in a
     composed process after the sample's whole chain (:meth:`rwpend_ros.intra.LocalBus.after`).
     When no sample came since the last tick the work runs at the tick, as a plain timer's would;

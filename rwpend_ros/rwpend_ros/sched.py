@@ -131,9 +131,9 @@ class CpuLatencyRequest:
 
     An idle CPU waits in an idle state (``halt``, C-states) and takes time to wake up when a
     message arrives; on this project's 2-vCPU VM a wake-up costs ~30-60 µs at the median, and a
-    loop sample wakes four threads in turn (PERFORMANCE.md, 13.). Writing ``us`` to
-    ``/dev/cpu_dma_latency`` and keeping the file open tells the cpuidle governor to use only
-    idle states that wake up within ``us`` microseconds; 0 keeps an idle CPU polling (the
+    loop sample wakes four threads in turn (PERFORMANCE.md, "What each mechanism buys"). Writing
+    ``us`` to ``/dev/cpu_dma_latency`` and keeping the file open tells the cpuidle governor to use
+    only idle states that wake up within ``us`` microseconds; 0 keeps an idle CPU polling (the
     setting ``cyclictest`` and real-time Linux guides use). The request ends when the file is
     closed (:meth:`close`, or the process exits), so nothing outlives the stack.
 

@@ -26,9 +26,9 @@ class SampleTime:
     subscription (a DDS message, a Python message object and a callback per sample, in every
     node, all competing with the loop for the CPU) is then left out. Measured in lockstep,
     separate processes: 2.5-2.9x -> 3.9-4.4x real time, CPU 0.66-0.77 -> 0.34-0.38 s per
-    simulated s (PERFORMANCE.md, 15.). The time only moves forward; timers on the ROS clock
-    fire as with ``/clock`` (the same rclpy override). What ``/clock`` gives and this does
-    not: time moving while no sample comes (a controller's stale-state watchdog cannot see
+    simulated s (PERFORMANCE.md, "What each mechanism buys"). The time only moves forward; timers on
+    the ROS clock fire as with ``/clock`` (the same rclpy override). What ``/clock`` gives and this
+    does not: time moving while no sample comes (a controller's stale-state watchdog cannot see
     the estimator stop -- in lockstep the simulator's ``lockstep_timeout`` zeroes the motor
     and counts it instead)."""
 

@@ -7,7 +7,8 @@ sends towards it for 0.3-3 s (``publish()`` took 1000 then 2000 ms in one measur
 simulator and the recorder froze 1-2.8 s in the dead-controller system test, 2 runs in 12
 on a loaded machine). On the rig that freezes the driver's loop long enough for the device
 watchdog to trip. Over UDP a dead peer costs nothing: no ``publish()`` over 12 ms in 108
-kills, against 8 stalls of 0.33-3 s in 168 kills over shared memory (PERFORMANCE.md, 11.).
+kills, against 8 stalls of 0.33-3 s in 168 kills over shared memory (PERFORMANCE.md, "What
+each mechanism buys").
 
 ``RWPEND_TRANSPORT``:
 

@@ -244,7 +244,7 @@ def pack_diagnostic_array(sec: int, nanosec: int, statuses, frame_id: str = '') 
     and they are as long as its own serialization (unit-tested; the alignment padding here is
     zeros, rclpy leaves it as it finds it), for a fraction of the cost of building the message
     as objects: a node's diagnostics (~25 key-values) took 0.35-0.6 ms on the project's machine
-    that way, holding the GIL (PERFORMANCE.md, 19.)."""
+    that way, holding the GIL (PERFORMANCE.md, "What each mechanism buys")."""
     out = bytearray(pack_header(sec, nanosec, frame_id))
     statuses = list(statuses)
     out += bytes(_pad4(len(out)))

@@ -309,7 +309,7 @@ def _scenario(v: Any) -> Scenario:
 
 def study_from_dict(doc: Any, name: str = 'study') -> Study:
     """The study of a parsed spec; SpecError with the key and the reason. The values of every
-    run are checked too (:func:`rwpend_sweep.build.check_study`)."""
+    run are checked too (:func:`rwpend_sweep.build.prepare`)."""
     m = _mapping('spec', doc, TOP_KEYS)
     scenario = _scenario(m.get('scenario'))
     axes_doc = m.get('axes') or {}
