@@ -213,7 +213,7 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    'it): sim, driver, estimator, controller, control (--composed control), stack '
                    '(--composed) or recorder, on the CPUs CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
                    '--pin sim=0 --pin estimator=0 --pin controller=1 took 12-57 us off the median '
-                   'loop latency of separate processes (PERFORMANCE.md, 20.)')
+                   'loop latency of separate processes (PERFORMANCE.md, "What each mechanism buys")')
     p.add_argument('--console', nargs='?', const='8080', default=None, metavar='[LISTEN:]PORT',
                    help='also run the lab console (./rwpend console: the rig in a browser, and the '
                    'Foxglove bridge on 8765), on 127.0.0.1:8080 unless given; in lockstep sample 0 waits '
@@ -230,7 +230,7 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    'hosts of the network with the same up arguments): sim or driver, estimator, '
                    'controller, control (--composed control), stack (--composed) or recorder; e.g. '
                    'the rig PC --only sim, a laptop --only control, a console --only recorder. '
-                   'README, "Lab network"')
+                   'See docs/network.md.')
 
 
 def usable_cpus() -> set[int]:

@@ -172,7 +172,7 @@ class DriverNode(LifecycleNode):
         self.pub_estop_state = self.create_publisher(Bool, 'estop/state', QOS_LATCHED)
         self.pub_estop_state.publish(Bool(data=False))
         self.create_service(SetBool, '~/estop', self.on_estop_service)
-        # in the loop's slack: after a command is written, not while one waits (PERFORMANCE.md 19.)
+        # in the loop's slack: after a command is written, not while one waits (PERFORMANCE.md, "What each mechanism buys")
         self.diag_timer = SlackTimer(self, p['diagnostics_period'], self.publish_diagnostics)
         self.diag_lock = threading.Lock()   # the link thread reports losses at once, too
         self.health_before: dict = {}       # the link's counters at the previous diagnostics

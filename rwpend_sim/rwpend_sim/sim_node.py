@@ -13,7 +13,7 @@ Two time modes (parameter ``lockstep``):
   integrating; runs as fast as the loop allows; identical inputs give identical outputs.
   With ``lockstep_recorder_window`` W > 0 it also keeps within W samples of the recorder: sample
   k goes out once the recorder has reported (``recorder/progress``, rosgraph_msgs/Clock, every
-  :data:`rwpend_ros.RECORDER_PROGRESS_EVERY` samples) the ``/clock`` of sample k - W, so a
+  :data:`rwpend_ros.qos.RECORDER_PROGRESS_EVERY` samples) the ``/clock`` of sample k - W, so a
   recorder that runs behind (starved of CPU, a slow disk) slows the run down instead of losing
   messages (the publishers keep 100 samples for a reader that lags: QOS_CONTROL_PUB).
 
@@ -418,7 +418,7 @@ class SimNode(RwNode):
         through the in-process bus (rwpend_ros.intra), holding the callback lock as a callback
         of this node: the estimator, the controller it hands the state to, and this node's
         ``on_command`` (deferred until the sample is out) all run here, with no hand-over to the
-        executor's thread (PERFORMANCE.md, 18.)."""
+        executor's thread (PERFORMANCE.md, "What each mechanism buys")."""
         self.wait_for_loop(need_command=False)
         period_ns = self.period_ns
         t0_ros = self.get_clock().now().nanoseconds

@@ -38,7 +38,7 @@ def parser() -> argparse.ArgumentParser:
     text = re.sub(r':mod:`([^`]*)`', r'\1', '\n\n'.join(__doc__.split('\n\n')[1:3])).replace('``', '')
     p = _Parser(prog='rwpend sweep', description=text, formatter_class=argparse.RawDescriptionHelpFormatter,
                 epilog=f'Axis names: {axis_names_help()}.\nExample specs: rwpend_sweep/examples/. '
-                       'README, "Robustness studies".')
+                       'See docs/robustness_studies.md.')
     p.add_argument('spec', help='the study (YAML: scenario, axes, samples, seed)')
     p.add_argument('--out', required=True, metavar='DIR', help='output directory (resumed if it holds this study)')
     p.add_argument('--workers', type=int, default=None, metavar='N',
