@@ -29,8 +29,15 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
     assert res['machine']['transport'] == 'udp'
     assert res['settings']['periods_s'] == [0.001] and res['settings']['layouts'] == ['separate']
 
-    assert len(res['realtime']) == 1
+    assert [r['layout'] for r in res['realtime']] == ['separate', 'rig']
     rt = res['realtime'][0]
+    # the independent reader's verdict, per sample (rwpend_bag.judge)
+    assert rt['judged']['timed_samples'] > 0 and rt['judged']['source'].startswith('sim/true_state'), rt['judged']
+    # the rig through the emulator: judged from the device's applied commands
+    rig = res['realtime'][1]
+    assert rig['judged']['source'].startswith('applied'), rig.get('judged') or rig.get('error')
+    assert rig['judged']['timed_samples'] > 0 and rig['emulator_status'], rig
+    assert {'loop', 'loop/rwpend-bag'} <= set(rig['cpu_cores']), rig['cpu_cores']
     for key in ('layout', 'h_s', 'rate_hz', 'samples', 'latency_us', 'late_fraction',
                 'plant_late_fraction', 'jitter_us', 'period_us', 'dropped', 'cpu_cores',
                 'cpu_cores_total', 'other_cpu_cores', 'loadavg_before', 'exit_codes',
@@ -74,7 +81,7 @@ def test_bench_composed_layouts_in_real_time_lose_nothing(tmp_path, ros_env):
     the recorder loses nothing."""
     out = tmp_path / 'bench'
     p = subprocess.run([RWPEND, 'bench', '--duration', '3', '--h', '0.001', '--no-lockstep', '--no-decode', '--no-scale',
-                        '--layout', 'control', '--layout', 'composed', '-o', str(out)], env=ros_env,
+                        '--no-rig', '--layout', 'control', '--layout', 'composed', '-o', str(out)], env=ros_env,
                        capture_output=True, text=True, timeout=140)
     assert p.returncode == 0, f'{p.stdout[-3000:]}\n{p.stderr[-3000:]}'
     res = json.loads((out / 'bench.json').read_text())

@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
 
 
-@pytest.mark.parametrize('layout', [[], ['--composed', 'control']], ids=['separate', 'composed_control'])
+@pytest.mark.parametrize('layout', [[], ['--composed', 'control']], ids=['loop', 'composed_control'])
 def test_stack_on_the_emulated_rig_swings_up_and_balances(tmp_path, ros_env, layout):
     link = tmp_path / 'rig'
     bag = tmp_path / 'serial_run'

@@ -60,6 +60,7 @@ import os
 import platform
 import re
 import shutil
+import signal
 import sys
 import threading
 import time
@@ -345,8 +346,62 @@ def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
     res['cpu_cores_total'] = round(sum(v for v in cpu.values() if v is not None), 4)
     res['cpu_window_s'] = round(window, 3)
     res.update(bag_metrics(bag, ns, h, (w0, w1)))
+    res['judged'] = judged(bag)
     if trace_dir is not None:
         res.update(trace_metrics(trace_dir, res.get('window_seq')))
+    return res
+
+
+def judged(bag: Path) -> dict:
+    """The verdict of the whole run by the independent reader (:mod:`rwpend_bag.judge`, rosbags):
+    per sample, late = the command the plant held did not answer the previous sample
+    (``command_seq < seq - 1``, from ``sim/true_state`` or, on the rig, the device's ``applied``),
+    at zero = the command timeout held the motor at 0; falls after the first catch."""
+    from rwpend_bag.judge import judge, read_run
+    try:
+        v = judge(read_run(bag))
+    except Exception as exc:  # noqa: BLE001 - a bag that cannot be read: said in the result
+        return {'error': f'{type(exc).__name__}: {exc}'}
+    n = max(v.timed_samples, 1)
+    return {'samples': v.samples, 'timed_samples': v.timed_samples, 'late_samples': v.late_samples,
+            'late_fraction': v.late_samples / n, 'zero_samples': v.zero_samples,
+            'zero_fraction': v.zero_samples / n, 'falls': v.falls, 'alive_at_end': v.alive_at_end,
+            'problems': list(v.problems), 'source': v.source}
+
+
+def run_rig(out: Path, h: float, duration: float, env: dict, ns: str, echo=None, up_extra=(),
+            rt_priority: int = 0) -> dict:
+    """A real-time run of the rig path: the device's firmware core on a pseudo-terminal (``./rwpend
+    emulate``, a process of its own, 10 real-time priorities above the loop where the loop has
+    one) and ``up --plant serial:LINK`` in its default layout (the driver as the loop's plant);
+    the emulator's own counters (its late instants, the commands' latency) go into the result."""
+    import subprocess
+    tag = f'rig_h{h * 1e6:g}us'
+    link = out / f'{tag}.link'
+    emu_log = out / f'{tag}.emulator.log'
+    cmd = [sys.executable, '-m', 'rwpend_driver.emulator', '--link', str(link), '--h', repr(h),
+           '--rt-priority', str(min(99, rt_priority + 10) if rt_priority else 0)]
+    with open(emu_log, 'w', encoding='utf-8') as f:
+        emu = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env)
+    try:
+        deadline = time.monotonic() + 30.0
+        while not link.exists() and emu.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if not link.exists():
+            return {'layout': 'rig', 'h_s': h, 'rate_hz': round(1.0 / h),
+                    'error': f'the emulator did not start (its log: {emu_log})'}
+        res = run_realtime(out, h, duration, 'loop', env, ns, echo,
+                           up_extra=[*up_extra, '--plant', f'serial:{link}'], tag=tag)
+    finally:
+        emu.send_signal(signal.SIGINT)
+        try:
+            emu.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            emu.kill()
+            emu.wait()
+    res['layout'] = 'rig'
+    status = [ln for ln in emu_log.read_text(encoding='utf-8').splitlines() if ' status ' in ln]
+    res['emulator_status'] = status[-1].split(' status ', 1)[1] if status else None
     return res
 
 
@@ -770,6 +825,15 @@ def summary_text(res: dict) -> str:
                              f"{_fmt(pl.get('p99'))}, p99.9 {_fmt(pl.get('p99.9'))}, max {_fmt(pl.get('max'))} us; "
                              f"late {_fmt(None if pr is None else 100 * pr, 3)} %")
                 lines.append('            stages p50/p99 (us): ' + _stages_text(r.get('stages_us')))
+            j = r.get('judged') or {}
+            if 'late_fraction' in j:
+                lines.append(f"            judged from the bag, per sample ({j['source']}): late "
+                             f"{100 * j['late_fraction']:.3f} %, at zero {100 * j['zero_fraction']:.3f} % of "
+                             f"{j['timed_samples']}; falls {j['falls']}, alive at the end {j['alive_at_end']}")
+            elif j:
+                lines.append(f"            judged from the bag: {j.get('error')}")
+            if r.get('error'):
+                lines.append(f"            error: {r['error']}")
             lines.append('            CPU per process (cores): ' + ', '.join(
                 f'{k} {_fmt(v, 2)}' for k, v in r.get('cpu_cores', {}).items())
                 + f"; load {r.get('loadavg_before')}")
@@ -842,6 +906,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--lockstep-duration', type=float, default=None,
                    help='simulated seconds of each lockstep run (default 12; 4 with --quick)')
     p.add_argument('--no-realtime', action='store_true', help='skip the real-time runs')
+    p.add_argument('--no-rig', action='store_true', help='skip the real-time runs of the rig through '
+                   'the emulator (./rwpend emulate, up --plant serial:)')
     p.add_argument('--no-lockstep', action='store_true', help='skip the lockstep runs')
     p.add_argument('--no-decode', action='store_true', help='skip the bag decode benchmark')
     p.add_argument('--no-scale', action='store_true', help='skip the scale run (rigs per machine)')
@@ -938,6 +1004,12 @@ def main(argv=None) -> int:
                     r = run_realtime(out, h, duration, layout, env, a.ns, echo,
                                      up_extra=[*up_extra, *(x for v in pins.get(layout, ()) for x in ('--pin', v))])
                     res['realtime'].append(r)
+            if not a.no_rig:
+                for h in periods:
+                    say(f'rwpend bench: real time, the rig through the emulator, h = {h * 1e3:g} ms, '
+                        f'{duration:g} s ...')
+                    res['realtime'].append(run_rig(out, h, duration, env, a.ns, echo, up_extra=up_extra,
+                                                   rt_priority=a.rt_priority))
         if not a.no_lockstep:
             for layout in layouts:
                 for record in (False, True):

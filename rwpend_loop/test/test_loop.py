@@ -177,3 +177,35 @@ def test_pacer_stops():
             stop.set()
         return True
     assert p.run(tick, stop, t0_ns=0) == 5
+
+
+def test_the_rig_loop_steps_on_each_sample_the_device_sends(rig):
+    """The driver's side (rwpend_loop.rig): the device is the sample clock; each sample read is
+    one step, the command goes to the driver's claim at once; the u the estimator takes is the
+    one the device says it held. A simulated device here, stepped as the firmware does."""
+    from rwpend_loop.rig import DriverGate, LinkReading
+
+    class Driver:                       # the one way to the device: DriverNode._offer
+        def __init__(self):
+            self.core = SimCore(rig, command_timeout_samples=3)
+            self.sent = []
+
+        def _offer(self, source, seq, u, release=False):
+            self.sent.append((source, seq))
+            return self.core.command(seq, u)[0]
+
+    drv = Driver()
+    hw = LinkReading()
+    est = EstimatorStage(make_estimator(None, rig, EstimatorConfig.from_values({}, rig=rig)))
+    ctrl = ControllerStage(Controller(rig, ControllerConfig.designed(rig), mode='auto'), ID)
+    loop = Loop(hw, DriverGate(drv), est, ctrl, rig.sample_period)
+    u_held = 0.0
+    for _ in range(8000):
+        seq, pc, mc = drv.core.sample()
+        hw.set(seq, pc, mc, u_held)
+        tick = loop.step(t=seq * rig.sample_period)
+        assert tick.taken and drv.sent[-1] == (ID, seq)
+        u_held = drv.core.advance()
+    s = drv.core.plant.state
+    assert abs(math.remainder(s.theta - math.pi, 2 * math.pi)) < 0.05, 'swung up and balanced'
+    assert loop.gate.interval(False) == 0.0 and loop.gate.take_event() is None
