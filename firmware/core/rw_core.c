@@ -123,6 +123,7 @@ static size_t hello_reply(rw_core *c, uint8_t *out, size_t cap)
 static void set_enabled(rw_core *c, uint8_t on, uint32_t now_us)
 {
     c->u_milli = 0;
+    c->expired = 0;
     c->cmd_sample = RW_NO_SAMPLE;
     c->saturated = 0;
     c->last_command_us = now_us;
@@ -159,6 +160,7 @@ static void command(rw_core *c, const rw_frame *f, uint32_t now_us)
     c->saturated = (u > lim || u < -lim);
     c->u_milli = (int16_t)(u > lim ? lim : u < -lim ? -lim : u);
     c->cmd_sample = sample;
+    c->expired = 0;
     c->last_command_us = now_us;                         /* feeds the watchdog */
     c->fresh = 1;
     c->n.commands++;
@@ -186,6 +188,14 @@ static size_t handle(rw_core *c, const rw_frame *f, uint32_t now_us, uint8_t *ou
             return ack(c, f, RW_R_BAD_VALUE, out, cap);  /* "out of range: nothing changes" */
         c->watchdog_ms = ms;
         event(c, RW_EV_WATCHDOG_PERIOD, now_us, ms, 0);
+        return ack(c, f, RW_R_OK, out, cap);
+    }
+    case RW_SET_HOLD: {
+        uint16_t n = rw_get_u16(f->payload);
+        if (n > RW_HOLD_MAX_SAMPLES)
+            return ack(c, f, RW_R_BAD_VALUE, out, cap);  /* "out of range: nothing changes" */
+        c->hold_samples = n;
+        event(c, RW_EV_HOLD_LIMIT, now_us, n, 0);
         return ack(c, f, RW_R_OK, out, cap);
     }
     case RW_ZERO: {
@@ -242,9 +252,21 @@ int32_t rw_core_tick_begin(rw_core *c, uint32_t now_us)
         c->n.watchdog_trips++;
         event(c, RW_EV_WATCHDOG_TRIP, now_us, since > 0x7FFFFFFFu ? 0x7FFFFFFF : (int32_t)since, before);
     }
+    /* "Hold limit: each sample, if enabled, a hold limit is set and the held command is not 0
+     * and answers a sample more than max_age samples before the one this period ends at (k+1):
+     * command 0 until the next valid COMMAND; the SAMPLE says no command held." */
+    if (c->enabled && c->hold_samples && c->u_milli != 0 && c->cmd_sample != RW_NO_SAMPLE
+        && c->k + 1u - c->cmd_sample > (uint32_t)c->hold_samples) {
+        int32_t before = c->u_milli;
+        c->u_milli = 0;
+        c->saturated = 0;
+        c->expired = 1;
+        c->n.hold_expired++;
+        event(c, RW_EV_HOLD_EXPIRED, now_us, (int32_t)(c->k + 1u - c->cmd_sample), before);
+    }
     /* "apply held command for the period" (0 when disabled) */
     c->applied_milli = c->enabled ? c->u_milli : 0;
-    c->applied_sample = c->enabled ? c->cmd_sample : RW_NO_SAMPLE;
+    c->applied_sample = c->enabled && !c->expired ? c->cmd_sample : RW_NO_SAMPLE;
     return c->applied_milli;
 }
 
@@ -343,6 +365,8 @@ void rw_core_snapshot(const rw_core *c, rw_snapshot *s)
     s->ignored_commands = c->n.ignored_commands;
     s->refused = c->n.refused;
     s->watchdog_trips = c->n.watchdog_trips;
+    s->hold_samples = c->hold_samples;
+    s->hold_expired = c->n.hold_expired;
     s->samples = c->n.samples;
     s->tx_frames = c->n.tx_frames;
     s->tx_bytes = c->n.tx_bytes;

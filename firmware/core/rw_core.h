@@ -49,6 +49,8 @@ enum rw_event_kind {
     RW_EV_WATCHDOG_TRIP = 3,  /* a = us since the last valid COMMAND (or ENABLE), b = u_milli held */
     RW_EV_WATCHDOG_PERIOD = 4,/* a = the new period, ms */
     RW_EV_ZERO = 5,           /* a = the mask */
+    RW_EV_HOLD_LIMIT = 6,     /* a = the new max_age, samples (0: none) */
+    RW_EV_HOLD_EXPIRED = 7,   /* a = the held command's age, samples; b = u_milli held */
 };
 
 typedef struct {
@@ -75,6 +77,7 @@ typedef struct {
     uint32_t ignored_commands; /* valid COMMANDs while disabled */
     uint32_t refused;          /* well-formed frames refused: future or old COMMAND, ACK result != 0 */
     uint32_t watchdog_trips;
+    uint32_t hold_expired;     /* commands zeroed by the hold limit (too old to drive the motor) */
     uint32_t samples;          /* SAMPLE frames made */
     uint32_t tx_frames;        /* frames made (seq advanced) */
     uint32_t tx_bytes;
@@ -91,6 +94,8 @@ typedef struct {
     uint32_t k;                /* sample counter, the k of the last SAMPLE sent */
     uint16_t tx_seq;           /* seq of the next frame sent */
     uint16_t watchdog_ms;
+    uint16_t hold_samples;     /* SET_HOLD max_age: 0 = no limit */
+    uint8_t expired;           /* the held command was zeroed by the hold limit */
     uint8_t enabled;           /* amplifier on */
     uint8_t tripped;           /* ST_WATCHDOG, latched until ENABLE 1 */
     uint8_t fresh;             /* ST_CMD_FRESH */
@@ -176,7 +181,9 @@ void rw_core_set_sample(rw_core *c, uint32_t k);
     X(uint32_t, u32, rx_truncated)                                                     \
     X(uint32_t, u32, rx_unknown_type)                                                  \
     X(uint32_t, u32, rx_garbage_bytes)                                                 \
-    X(uint32_t, u32, rx_bytes)
+    X(uint32_t, u32, rx_bytes)                                                         \
+    X(uint32_t, u32, hold_samples)      /* SET_HOLD max_age (0: no limit) */           \
+    X(uint32_t, u32, hold_expired)
 
 typedef struct {
 #define RW_X_FIELD(ctype, code, name) ctype name;
@@ -193,7 +200,7 @@ size_t rw_core_size(void);
 size_t rw_snapshot_size(void);
 size_t rw_config_size(void);
 
-/* "1.0.0" (rw_version.h). */
+/* "1.1.0" (rw_version.h). */
 const char *rw_fw_version(void);
 
 #endif /* RW_CORE_H */

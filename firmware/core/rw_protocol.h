@@ -23,7 +23,7 @@
 
 /* ------------------------------------------------------------------ "Versioning" */
 #define RW_PROTO_MAJOR 1u
-#define RW_PROTO_MINOR 0u
+#define RW_PROTO_MINOR 1u
 
 /* ------------------------------------------------------------------ "Messages"
  * X(name, type, payload size, direction). The payload layouts (field offsets) are written out
@@ -37,6 +37,7 @@
     X(ENABLE,       0x03, 1,  RW_TO_DEVICE)         \
     X(SET_WATCHDOG, 0x04, 2,  RW_TO_DEVICE)         \
     X(ZERO,         0x05, 1,  RW_TO_DEVICE)         \
+    X(SET_HOLD,     0x06, 2,  RW_TO_DEVICE)         \
     X(HELLO_REPLY,  0x81, 24, RW_TO_HOST)           \
     X(SAMPLE,       0x82, 26, RW_TO_HOST)           \
     X(ACK,          0x83, 4,  RW_TO_HOST)
@@ -75,6 +76,7 @@ enum rw_msg_size {
 #define RW_WATCHDOG_MIN_MS 2u         /* SET_WATCHDOG period_ms range */
 #define RW_WATCHDOG_MAX_MS 1000u
 #define RW_WATCHDOG_POWER_UP_MS 50u   /* "Device behaviour": watchdog 50 ms at power-up */
+#define RW_HOLD_MAX_SAMPLES 1000u     /* SET_HOLD max_age range 0..1000 (0: no limit, at power-up) */
 #define RW_ZERO_PENDULUM 0x01u        /* ZERO mask bits */
 #define RW_ZERO_MOTOR 0x02u
 

@@ -6,7 +6,7 @@
 #define RW_VERSION_H
 
 #define RW_FW_MAJOR 1
-#define RW_FW_MINOR 0
+#define RW_FW_MINOR 1
 #define RW_FW_PATCH 0
 
 #define RW_STR_(x) #x

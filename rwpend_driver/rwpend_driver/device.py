@@ -11,6 +11,8 @@ host tests compare with frame for frame, the PC side's tests' fake device, and
 Per tick (sample k -> k+1):
 1. watchdog: enabled and more than ``watchdog_period`` since the last valid COMMAND (or since
    ENABLE) -> amplifier disabled, command zero, ST_WATCHDOG latched (until ENABLE 1);
+   hold limit (SET_HOLD, protocol 1.1): a non-zero held command answering a sample more than
+   ``max_age`` samples before k+1 -> command zero until the next valid COMMAND;
 2. the held command (0 when disabled) drives the plant over one sample period (ZOH);
 3. the encoders are read and one SAMPLE frame is sent.
 """
@@ -24,7 +26,7 @@ from rwpend_model.rig import Rig
 
 from . import protocol as P
 
-FW_VERSION = (1, 0, 0)
+FW_VERSION = (1, 1, 0)
 DEFAULT_WATCHDOG_MS = 50
 
 
@@ -34,6 +36,7 @@ class DeviceCounters:
     ignored_commands: int = 0    # valid COMMANDs while disabled
     refused: int = 0             # well-formed frames refused (future sample, bad value, state)
     watchdog_trips: int = 0
+    hold_expired: int = 0        # non-zero commands zeroed by the hold limit
     samples: int = 0
     tx_bytes: int = 0
 
@@ -57,13 +60,15 @@ class DeviceCore:
         self.serial = serial
         self.h = rig.sample_period
         self.u_max_milli = int(round(rig.u_max * P.U_SCALE))
-        self.parser = P.StreamParser(accept={P.HELLO, P.COMMAND, P.ENABLE, P.SET_WATCHDOG, P.ZERO})
+        self.parser = P.StreamParser(accept={P.HELLO, P.COMMAND, P.ENABLE, P.SET_WATCHDOG, P.ZERO, P.SET_HOLD})
         self.tx_seq = 0
         self.k = 0                      # sample counter (u32 on the wire)
         self.t0 = now
         self.enabled = False
         self.tripped = False
         self.watchdog_ms = watchdog_ms
+        self.hold_samples = 0           # SET_HOLD max_age (0: no limit)
+        self.expired = False            # the held command was zeroed by the hold limit
         self.last_command_time = now
         self.u_milli = 0                # held command (milli-units, clamped)
         self.cmd_sample = P.NO_SAMPLE   # sample answered by the held command
@@ -153,6 +158,12 @@ class DeviceCore:
             self.watchdog_ms = m.period_ms
             self._event('watchdog_period', period_ms=m.period_ms)
             return self._ack(fr, P.R_OK)
+        if fr.type == P.SET_HOLD:
+            if m.max_age > P.HOLD_MAX_SAMPLES:
+                return self._ack(fr, P.R_BAD_VALUE)
+            self.hold_samples = m.max_age
+            self._event('hold_limit', max_age=m.max_age)
+            return self._ack(fr, P.R_OK)
         if fr.type == P.ZERO:
             if m.mask == 0 or m.mask & ~(P.ZERO_PENDULUM | P.ZERO_MOTOR):
                 return self._ack(fr, P.R_BAD_VALUE)
@@ -183,12 +194,14 @@ class DeviceCore:
         self.saturated = abs(u) > self.u_max_milli
         self.u_milli = max(-self.u_max_milli, min(self.u_max_milli, u))
         self.cmd_sample = m.sample
+        self.expired = False
         self.last_command_time = now
         self.fresh = True
         self.counters.commands += 1
 
     def set_enabled(self, on: bool, now: float) -> None:
         self.u_milli = 0
+        self.expired = False
         self.cmd_sample = P.NO_SAMPLE
         self.saturated = False
         self.last_command_time = now
@@ -215,6 +228,21 @@ class DeviceCore:
             return True
         return False
 
+    def check_hold(self) -> bool:
+        """The hold limit: a non-zero command answering a sample more than ``hold_samples`` before
+        the one this period ends at (k+1) is zeroed until the next valid command."""
+        age = (self.k + 1 - self.cmd_sample) & 0xFFFFFFFF
+        if (self.enabled and self.hold_samples and self.u_milli != 0 and self.cmd_sample != P.NO_SAMPLE
+                and age > self.hold_samples):
+            before = self.u_milli
+            self.u_milli = 0
+            self.saturated = False
+            self.expired = True
+            self.counters.hold_expired += 1
+            self._event('hold_expired', sample=self.k, age=age, u_before=before / P.U_SCALE)
+            return True
+        return False
+
     def held_command(self) -> float:
         return self.u_milli / P.U_SCALE if self.enabled else 0.0
 
@@ -228,8 +256,9 @@ class DeviceCore:
         """The sample instant, as the firmware's core (rw_core_tick_begin): the watchdog, then the
         command the motor gets over [t_k, t_k+1) (milli-units; 0 while disabled)."""
         self.check_watchdog(now)
+        self.check_hold()
         self.u_applied_milli = self.u_milli if self.enabled else 0
-        self._applied_sample = self.cmd_sample if self.enabled else P.NO_SAMPLE
+        self._applied_sample = self.cmd_sample if self.enabled and not self.expired else P.NO_SAMPLE
         return self.u_applied_milli
 
     def tick_end(self, now: float, pendulum_counts: int | None = None, motor_counts: int | None = None) -> bytes:

@@ -28,7 +28,8 @@ emulator in time; ``stalls`` episodes, ``max_late_ms``), ``dropped_tx`` (bytes a
 port open did not take: the PC side does not keep up), ``unheard_tx`` (bytes sent while no host
 had the port open: they go nowhere, as on a UART with nothing connected), and the device's own
 ``rx_bad`` (frames it refused: ``refused`` of them well-formed but not acceptable), its
-``watchdog_trips``. A host opening or closing the port is an event (``host``). ``cmd_latency``
+``watchdog_trips`` and ``hold_expired`` (commands zeroed by the hold limit: too old to drive the
+motor). A host opening or closing the port is an event (``host``). ``cmd_latency``
 (p50/p99/max) is the whole PC side's loop as the device sees it: from a SAMPLE sent to the
 first command answering it; ``late_commands`` came after the next SAMPLE had gone out.
 """
@@ -259,6 +260,8 @@ class Emulator:
             self.output.line(f'[{data["t"]:10.3f}] {event} {rest}')
 
     def on_core_event(self, name: str, data: dict) -> None:
+        if name == 'hold_expired':          # one per late command: counted in the status line
+            return
         if name == 'watchdog_trip' and self.unplugged_at is not None:
             data = dict(data, since_unplug=data['t'] - self.unplugged_at)
         self.emit(name, **data)
@@ -380,7 +383,8 @@ class Emulator:
                   cmd_sample=c.cmd_sample, commands=c.counters.commands, pendulum_counts=pc, motor_counts=mc,
                   theta=round(s.theta, 6), wheel_rate=round(s.wheel_rate, 4), rx_bad=c.rx_bad,
                   refused=c.counters.refused, ignored=c.counters.ignored_commands,
-                  watchdog_trips=c.counters.watchdog_trips, rx_stats=c.rx_stats(),
+                  watchdog_trips=c.counters.watchdog_trips, hold_expired=c.counters.hold_expired,
+                  rx_stats=c.rx_stats(),
                   overruns=e.overruns, stalls=e.stalls, max_late_ms=round(e.max_late_ms, 3),
                   dropped_tx=e.dropped_tx, unheard_tx=e.unheard_tx, host=self.host,
                   connected=self.pty is not None, late_commands=e.late_commands,

@@ -92,7 +92,8 @@ class _Drive(ctypes.Structure):
 
 
 _EVENT_FN = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.POINTER(_Event))
-_EV_ENABLE, _EV_DISABLE, _EV_WATCHDOG_TRIP, _EV_WATCHDOG_PERIOD, _EV_ZERO = 1, 2, 3, 4, 5
+_EV_ENABLE, _EV_DISABLE, _EV_WATCHDOG_TRIP, _EV_WATCHDOG_PERIOD, _EV_ZERO, _EV_HOLD_LIMIT, _EV_HOLD_EXPIRED = \
+    1, 2, 3, 4, 5, 6, 7
 _lib_lock = threading.Lock()
 _lib: Optional[ctypes.CDLL] = None
 
@@ -163,6 +164,7 @@ class CoreCounters:
     refused: int
     watchdog_trips: int
     samples: int
+    hold_expired: int = 0
 
 
 class FirmwareCore:
@@ -171,7 +173,8 @@ class FirmwareCore:
     Times are the emulator's clock in seconds, given to the core as its microsecond device clock
     (wrapping at 2**32 us, as the board's). ``on_event(name, data)`` gets the core's events with the
     names and data the emulator prints: ``enable``/``disable`` (sample), ``watchdog_trip`` (t,
-    since_command, sample, u_before, period), ``watchdog_period`` (period_ms), ``zero`` (mask)."""
+    since_command, sample, u_before, period), ``watchdog_period`` (period_ms), ``zero`` (mask),
+    ``hold_limit`` (max_age), ``hold_expired`` (sample, age, u_before)."""
 
     OUT_CAP = 16384
     CHUNK = 2048           # received bytes per call: their replies always fit OUT_CAP
@@ -219,6 +222,10 @@ class FirmwareCore:
             self.on_event('watchdog_period', {'period_ms': ev.a})
         elif ev.kind == _EV_ZERO:
             self.on_event('zero', {'mask': ev.a})
+        elif ev.kind == _EV_HOLD_LIMIT:
+            self.on_event('hold_limit', {'max_age': ev.a})
+        elif ev.kind == _EV_HOLD_EXPIRED:
+            self.on_event('hold_expired', {'sample': ev.sample, 'age': ev.a, 'u_before': ev.b / P.U_SCALE})
 
     # ------------------------------------------------------------------ the HAL's calls
     def receive(self, data: bytes, now: float) -> bytes:
@@ -289,7 +296,8 @@ class FirmwareCore:
     @property
     def counters(self) -> CoreCounters:
         s = self.snapshot()
-        return CoreCounters(s.commands, s.ignored_commands, s.refused, s.watchdog_trips, s.samples)
+        return CoreCounters(s.commands, s.ignored_commands, s.refused, s.watchdog_trips, s.samples,
+                            s.hold_expired)
 
     def held_command(self) -> float:
         """The command held now (control units; 0 while disabled)."""

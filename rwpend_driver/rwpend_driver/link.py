@@ -83,8 +83,10 @@ class LinkConfig:
                 not P.WATCHDOG_MIN_MS <= round(wd * 1000) <= P.WATCHDOG_MAX_MS:
             e.append(f'watchdog_period must be in [{P.WATCHDOG_MIN_MS / 1000}, {P.WATCHDOG_MAX_MS / 1000}] s, '
                      f'got {wd!r}')
-        if not isinstance(self.command_timeout_samples, int) or self.command_timeout_samples < 1:
-            e.append(f'command_timeout_samples must be an integer >= 1, got {self.command_timeout_samples!r}')
+        if not isinstance(self.command_timeout_samples, int) or \
+                not 1 <= self.command_timeout_samples <= P.HOLD_MAX_SAMPLES:
+            e.append(f'command_timeout_samples must be an integer in 1..{P.HOLD_MAX_SAMPLES} (the device\'s '
+                     f'hold limit), got {self.command_timeout_samples!r}')
         for name in ('link_timeout', 'handshake_timeout', 'backoff_initial', 'backoff_max'):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
@@ -186,6 +188,8 @@ class DriverLink:
         self.error = 'not connected yet'
         self.fatal = False
         self.hello: Optional[P.HelloReply] = None
+        self.hold_limit = 0                  # the device's hold limit set at connect (SET_HOLD; 0: none)
+        self.hold_warned = False
         self.period = 0.001               # the device's sample period (HELLO_REPLY)
         self.next_attempt = 0.0
         self.backoff = cfg.backoff_initial
@@ -324,6 +328,17 @@ class DriverLink:
         self.period = h.sample_period_us * 1e-6 if h.sample_period_us else 0.001
         self._request(P.Enable(0), 'ENABLE 0')
         self._request(P.SetWatchdog(int(round(c.watchdog_period * 1000))), 'SET_WATCHDOG')
+        self.hold_limit = 0
+        if h.proto_minor >= P.HOLD_SINCE_MINOR:
+            # the device zeroes a command command_timeout_samples old by itself: a PC that
+            # stalls leaves no command on the motor longer than the simulator would
+            self._request(P.SetHold(c.command_timeout_samples), 'SET_HOLD')
+            self.hold_limit = c.command_timeout_samples
+        elif not self.hold_warned:
+            self.hold_warned = True
+            self.log('warn', f'firmware protocol {h.proto_major}.{h.proto_minor} has no hold limit (SET_HOLD, '
+                             f'1.{P.HOLD_SINCE_MINOR}): when this PC stalls, the device holds the last command '
+                             f'until its watchdog ({c.watchdog_period * 1000:g} ms); update the firmware')
         if self.zero_pending:
             self._request(P.Zero(P.ZERO_PENDULUM | P.ZERO_MOTOR), 'ZERO')
             self.zero_pending = False
@@ -647,7 +662,8 @@ class DriverLink:
             h = self.hello
             d.update({'firmware': f'{h.fw_major}.{h.fw_minor}.{h.fw_patch}',
                       'protocol': f'{h.proto_major}.{h.proto_minor}', 'device_serial': f'{h.serial:#010x}',
-                      'device_counts_per_rev': h.counts_per_rev_pendulum})
+                      'device_counts_per_rev': h.counts_per_rev_pendulum,
+                      'device_hold_limit_samples': self.hold_limit})
         s = self.last_sample
         if s is not None:
             d.update({'device.sample': s.sample, 'device.time_us': s.time_us,

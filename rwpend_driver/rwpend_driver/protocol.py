@@ -25,7 +25,7 @@ OVERHEAD = HEADER_SIZE + CRC_SIZE       # 8
 MAX_PAYLOAD = 64                        # longer len fields are refused as bad length
 
 PROTOCOL_MAJOR = 1
-PROTOCOL_MINOR = 0
+PROTOCOL_MINOR = 1
 
 # ----------------------------------------------------------------- message types
 # PC -> device
@@ -34,6 +34,7 @@ COMMAND = 0x02
 ENABLE = 0x03
 SET_WATCHDOG = 0x04
 ZERO = 0x05
+SET_HOLD = 0x06            # protocol 1.1
 # device -> PC
 HELLO_REPLY = 0x81
 SAMPLE = 0x82
@@ -64,6 +65,10 @@ U_SCALE = 1000
 U_MILLI_LIMIT = 32767
 WATCHDOG_MIN_MS = 2
 WATCHDOG_MAX_MS = 1000
+#: SET_HOLD max_age range (samples; 0 = no limit, the power-up value)
+HOLD_MAX_SAMPLES = 1000
+#: the first minor version with SET_HOLD
+HOLD_SINCE_MINOR = 1
 ZERO_PENDULUM = 0x01
 ZERO_MOTOR = 0x02
 
@@ -88,6 +93,10 @@ class SetWatchdog(NamedTuple):
 
 class Zero(NamedTuple):
     mask: int
+
+
+class SetHold(NamedTuple):
+    max_age: int       # samples a held command may drive the motor after the one it answers (0: no limit)
 
 
 class HelloReply(NamedTuple):
@@ -122,7 +131,7 @@ class Ack(NamedTuple):
     request_seq: int
 
 
-Message = Union[Hello, Command, Enable, SetWatchdog, Zero, HelloReply, Sample, Ack]
+Message = Union[Hello, Command, Enable, SetWatchdog, Zero, SetHold, HelloReply, Sample, Ack]
 
 #: type -> (struct, NamedTuple)
 LAYOUT: dict[int, tuple[struct.Struct, type]] = {
@@ -131,13 +140,14 @@ LAYOUT: dict[int, tuple[struct.Struct, type]] = {
     ENABLE: (struct.Struct('<B'), Enable),
     SET_WATCHDOG: (struct.Struct('<H'), SetWatchdog),
     ZERO: (struct.Struct('<B'), Zero),
+    SET_HOLD: (struct.Struct('<H'), SetHold),
     HELLO_REPLY: (struct.Struct('<BBBBBBIIHHHI'), HelloReply),
     SAMPLE: (struct.Struct('<IIiiHhIH'), Sample),
     ACK: (struct.Struct('<BBH'), Ack),
 }
 TYPE_OF = {cls: t for t, (_, cls) in LAYOUT.items()}
 NAMES = {HELLO: 'HELLO', COMMAND: 'COMMAND', ENABLE: 'ENABLE', SET_WATCHDOG: 'SET_WATCHDOG',
-         ZERO: 'ZERO', HELLO_REPLY: 'HELLO_REPLY', SAMPLE: 'SAMPLE', ACK: 'ACK'}
+         ZERO: 'ZERO', SET_HOLD: 'SET_HOLD', HELLO_REPLY: 'HELLO_REPLY', SAMPLE: 'SAMPLE', ACK: 'ACK'}
 
 
 class ProtocolError(ValueError):

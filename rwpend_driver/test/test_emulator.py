@@ -101,7 +101,7 @@ def test_the_firmware_core_by_default_the_python_statement_on_request(tmp_path, 
     """``./rwpend emulate`` runs the firmware's C core (its version in the ready, status and exit
     lines); ``--core python`` the Python statement.  Either samples the plant the hand moved."""
     from rwpend_driver.firmware import firmware_version
-    for extra, fw in (([], firmware_version()), (['--core', 'python'], 'python 1.0.0')):
+    for extra, fw in (([], firmware_version()), (['--core', 'python'], 'python 1.1.0')):
         emu = Emulator(parse_args(['--json', '--duration', '0.05', '--status-period', '0.02', *extra]))
         emu.hands.put('lift 20 1')
         emu.run()

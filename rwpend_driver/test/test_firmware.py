@@ -31,7 +31,7 @@ from rwpend_model.plant import Plant
 from rwpend_model.rig import load_rig
 
 TO_DEVICE, TO_HOST = 0, 1
-REQUESTS = {P.HELLO, P.COMMAND, P.ENABLE, P.SET_WATCHDOG, P.ZERO}
+REQUESTS = {P.HELLO, P.COMMAND, P.ENABLE, P.SET_WATCHDOG, P.ZERO, P.SET_HOLD}
 
 
 @pytest.fixture(scope='module')
@@ -122,7 +122,7 @@ def test_protocol_md_vectors_made_and_taken_by_the_core(rig):
     made by it byte for byte."""
     c = E.FirmwareCore(rig, watchdog_ms=50)
     assert c.receive(bytes.fromhex('a55a010200000100023c'), 0.0).hex() == (      # HELLO 1.0, seq 0
-        'a55a81180000010001000000a00f0000a00f0000e803102732000100575282' '16')
+        'a55a81180000010101010000a00f0000a00f0000e80310273200010057527f' 'a6')
     c = E.FirmwareCore(rig, watchdog_ms=50)
     c.receive(P.pack(P.Enable(1), 0), 0.0)                                        # ACK, seq 0
     c.tick_begin(0.001)
@@ -134,6 +134,7 @@ def test_protocol_md_vectors_made_and_taken_by_the_core(rig):
     assert c.rx_bad == 1
     assert c.receive(bytes.fromhex('a55a0402020032' '00adc2'), 0.002)[2] == P.ACK  # SET_WATCHDOG 50
     assert c.receive(bytes.fromhex('a55a0501030003dc2d'), 0.002)[6:8] == bytes([P.ZERO, P.R_BAD_STATE])
+    assert c.receive(bytes.fromhex('a55a060204000300d058'), 0.002)[6:8] == bytes([P.SET_HOLD, P.R_OK])  # SET_HOLD 3
 
 
 def test_the_cores_version_is_the_hello_replys(rig):
@@ -152,8 +153,10 @@ def _random_traffic(rng: random.Random, k: int, frame_seq: int) -> bytes:
     if r < 0.45:
         msg = P.Command((k - rng.choice([0, 0, 0, 1, 2, 5, -1, -3, 40])) & 0xFFFFFFFF,
                         rng.choice([0, 500, -700, 2500, 9999, -10001, 20000, -32767, rng.randrange(-32767, 32768)]))
-    elif r < 0.6:
+    elif r < 0.56:
         msg = P.Enable(rng.choice([0, 1, 1, 1, 2, 255]))
+    elif r < 0.6:
+        msg = P.SetHold(rng.choice([0, 1, 3, 3, 1000, 1001, 65535]))
     elif r < 0.68:
         msg = P.SetWatchdog(rng.choice([1, 2, 5, 20, 50, 1000, 1001, 65535]))
     elif r < 0.75:
@@ -317,6 +320,38 @@ def test_set_watchdog_range(rig):
     while not d.tick().status & P.ST_WATCHDOG:
         n += 1
     assert n == 5
+
+
+def test_hold_limit_zeroes_a_command_too_old_until_a_newer_one(rig):
+    """SET_HOLD n (protocol 1.1): a non-zero command drives the motor over the n periods after
+    the sample it answers, then zero -- the SAMPLE says no command held -- until a newer
+    COMMAND; a zero command is left alone; 0 turns it off; above 1000 refused."""
+    events = []
+    d = Dev(rig, watchdog_ms=50, events=events)
+    for bad in (1001, 65535):
+        s = d.send(P.SetHold(bad))
+        assert d.last_ack() == P.Ack(P.SET_HOLD, P.R_BAD_VALUE, s)
+    d.send(P.SetHold(3))
+    assert d.last_ack().result == P.R_OK and ('hold_limit', {'max_age': 3}) in events
+    assert d.core.snapshot().hold_samples == 3
+    d.send(P.Enable(1))
+    s = d.tick()
+    d.send(P.Command(s.sample, 4000))
+    held = [d.tick() for _ in range(5)]
+    assert [x.u_applied_milli for x in held] == [4000, 4000, 4000, 0, 0]
+    assert [x.cmd_sample for x in held] == [s.sample] * 3 + [P.NO_SAMPLE] * 2
+    assert d.core.drive().magnitude_milli == 0 and d.core.snapshot().hold_expired == 1
+    name, data = [e for e in events if e[0] == 'hold_expired'][-1]
+    assert data['age'] == 4 and data['u_before'] == 4.0
+    assert held[-1].status & P.ST_ENABLED and not held[-1].status & P.ST_WATCHDOG   # not a trip
+    d.send(P.Command(held[-1].sample, -2000))                # a newer command drives it again
+    assert d.tick().u_applied_milli == -2000
+    d.send(P.Command(d.samples[-1].sample, 0))               # zero: nothing to expire
+    d.tick(6)
+    assert d.core.snapshot().hold_expired == 1 and d.samples[-1].cmd_sample != P.NO_SAMPLE
+    d.send(P.SetHold(0))                                     # off: held until the watchdog
+    d.send(P.Command(d.samples[-1].sample, 1000))
+    assert [x.u_applied_milli for x in (d.tick(), d.tick(10))] == [1000, 1000]
 
 
 def test_estop_enable_0_holds_the_motor_at_zero_until_enable_1(rig):
@@ -585,14 +620,17 @@ def test_board_image_in_qemu_speaks_to_the_driver(board_image):
             if link.command(seq, v)[0]:
                 sent[seq] = v
 
+        # QEMU's UART answers several samples late: a hold limit (and the link's freshness rule)
+        # of 1000 samples (its most) keeps those commands on the motor; SET_HOLD goes through the image
         link = DriverLink(LinkConfig(port=pts, counts_per_rev=4000, sample_period=0.001, handshake_timeout=2.0,
-                                     link_timeout=0.5), on_sample=on_sample)
+                                     link_timeout=0.5, command_timeout_samples=1000), on_sample=on_sample)
         link.set_active(True)
         end = time.monotonic() + 60
         while len(echoed) < 400 and time.monotonic() < end:
             link.poll(0.01)
         snap = link.snapshot()
         assert link.connected and snap['firmware'] == E.firmware_version(), snap
+        assert snap['protocol'] == '1.1' and snap["device_hold_limit_samples"] == 1000, snap
         assert len(echoed) >= 400, (len(echoed), snap)
         assert all(abs(u - v) < 1e-9 for _, v, u in echoed)           # the device holds what was sent
         assert snap['device.rx_bad'] == 0 and snap['rx.bad_crc'] == 0 and snap['commands_sent'] >= 400

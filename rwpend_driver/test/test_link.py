@@ -129,6 +129,7 @@ def serve(link, pub, n, u=1.0, every=1):
 def test_config_validation():
     for bad in (dict(port=''), dict(baud=0), dict(pendulum_sign=2), dict(motor_sign=0),
                 dict(watchdog_period=0.0), dict(watchdog_period=5.0), dict(command_timeout_samples=0),
+                dict(command_timeout_samples=1001),
                 dict(counts_per_rev=-1), dict(link_timeout=float('nan'))):
         with pytest.raises(ValueError):
             DriverLink(LinkConfig(**{'port': '/dev/x', **bad}))
@@ -144,6 +145,36 @@ def test_handshake_and_continuous_seq():
     assert not wire.dev.enabled                   # not active: amplifier stays off
     c = link.counters
     assert c.samples_lost == c.frames_lost == c.late_samples == c.overruns == 0
+
+
+def test_the_device_zeroes_a_command_as_old_as_the_timeout_itself():
+    """SET_HOLD command_timeout_samples at connect (protocol 1.1): when the PC stops answering,
+    the device holds the last command for that many samples, then zero -- not until its watchdog."""
+    link, wire, clock, pub = make(command_timeout_samples=3, watchdog_period=0.05)
+    link.set_active(True)
+    assert link.try_connect(), link.error
+    assert wire.dev.hold_samples == 3 and link.snapshot()['device_hold_limit_samples'] == 3
+    run(link, 5)
+    serve(link, pub, 20, u=2.0)
+    assert wire.dev.u_applied_milli == 2000
+    k = wire.dev.k
+    wire.run_until(clock.t + 0.0025)              # the PC stalls (not even its own timeout runs)
+    assert wire.dev.k - k in (2, 3) and wire.dev.u_applied_milli == 2000
+    wire.run_until(clock.t + 0.004)
+    assert wire.dev.u_applied_milli == 0 and wire.dev.counters.hold_expired == 1
+    assert wire.dev.enabled and not wire.dev.tripped   # not a watchdog trip: nothing latched
+
+
+def test_a_device_of_protocol_1_0_is_served_and_the_missing_hold_limit_said():
+    class Device10(DeviceCore):
+        def hello_reply(self):
+            return super().hello_reply()._replace(proto_minor=0)
+    logs = []
+    link, wire, clock, pub = make(Device10(load_rig(), now=0.0))
+    link.log = lambda level, msg: logs.append((level, msg))
+    assert link.try_connect(), link.error
+    assert wire.dev.hold_samples == 0 and link.hold_limit == 0
+    assert [m for lv, m in logs if lv == 'warn' and 'no hold limit' in m]
 
 
 def test_resolution_mismatch_is_fatal():
