@@ -122,21 +122,29 @@ def segment_figures(t: dict) -> dict:
             'upright': round(float(np.sum(x < 0.3)) / n, 4)}
 
 
+#: s after the cut command before the cut is sure to hold (the rules take effect, the last
+#: datagrams in flight arrive): a command timeout before then may be a late sample's
+CUT_TAKES_S = 0.2
+
+
 def cut_reaction(t: dict, t_cut: float, t_restore: float) -> dict:
     """From the samples of the cut: the newest command the plant took before it went to zero
     (``last_command``: the sample it answers), the sample instant from which the motor was at
-    zero by the command timeout (``zero_from``; ``sim/true_state`` of sample k reports the
-    command held over [t_k-1, t_k)), and the samples between the two."""
-    w = window(t, t_cut, t_restore)
-    timed = np.nonzero(w['command_timeout'])[0]
-    if not timed.size:
+    zero by the command timeout (``zero_from``: the start of the timeout that holds
+    :data:`CUT_TAKES_S` after the cut; ``sim/true_state`` of sample k reports the command held
+    over [t_k-1, t_k)), the samples between the two, and whether the motor stayed at zero from
+    then until the restore."""
+    held = window(t, t_cut + CUT_TAKES_S, t_restore)
+    if not held['seq'].size or not held['command_timeout'][0]:
         return {'zero_from': None}
-    k0 = int(w['seq'][timed[0]])
+    i = int(np.nonzero(t['seq'] == held['seq'][0])[0][0])
+    while i > 0 and t['command_timeout'][i - 1]:
+        i -= 1                                   # back to the start of that timeout
+    k0 = int(t['seq'][i])
     before = t['command_seq'][(t['seq'] <= k0)]
     last = int(before[before >= 0].max())
-    after = w['seq'] >= k0
     out = {'last_command': last, 'zero_from': k0 - 1, 'samples_to_zero': k0 - 1 - last,
-           'zero_until_restore': bool(np.all(w['command_timeout'][after] | (w['u_commanded'][after] == 0.0)))}
+           'zero_until_restore': bool(np.all(held['command_timeout'] | (held['u_commanded'] == 0.0)))}
     # after the restore: the first sample driven by a fresh command, and the first of 1 s upright
     later = t['stamp'] >= t_restore
     fresh = np.nonzero(later & ~t['command_timeout'].astype(bool))[0]
