@@ -27,6 +27,7 @@ HAND = {'Let the pendulum hang still': 'steady 0.5', 'Lift the pendulum to about
 #: start the stack of a run in time (at a load of 8-10 on 2 cores the nodes were still importing
 #: numpy and rclpy after the 30 s: 'encoders has 1 of 3 subscribers')
 REALTIME_SHORTFALL = re.compile(r'\d+ encoder samples missing in the recording|the step never started[^\n]*'
+                                r'|did not reach the motor whole[^\n]*'
                                 r'|the stack was not ready within \d+ s[^\n]*')
 #: the driver's summary of a run: commands sent, and refused as too old
 OLD_COMMANDS = re.compile(r'(\d+) commands sent, (\d+) old')

@@ -21,7 +21,7 @@ LATE_WARN_SHARE = 0.01
 LATE_ERROR_SHARE = 0.10
 
 ADVICE_KEEP_UP = ('the PC side does not keep the sample rate: run the stack with --rt-priority 50 '
-                  '(the emulator with --rt-priority 60) and --composed control, keep other load off '
+                  'and --cpu-latency 0 (the emulator with --rt-priority 60), keep other load off '
                   'this PC, or use a longer sample period (the firmware\'s and the stack\'s: '
                   './rwpend emulate --h 0.002, ./rwpend up --h 0.002)')
 ADVICE_WIRE = ('frames are corrupted on the way: check the cable and its connectors, and that the '

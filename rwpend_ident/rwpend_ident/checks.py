@@ -65,6 +65,30 @@ def saturation_problem(saturated_s: float, limit_s: float, what: str) -> str | N
     return None
 
 
+def delivery_problem(commanded: list, held: list) -> str | None:
+    """Why the first pulse did not reach the motor, or None: ``commanded`` the controller's
+    commands from the pulse's first sample on, ``held`` what the plant held over the same
+    samples (the device's report on the rig; the held value may be the amplifier's quantized
+    one). The pulse is the run of commands equal to the first; it reached the motor when the
+    plant held it for at least 80 % of those samples. A PC that falls behind the sample rate
+    sends its commands late, and the device holds none longer than its hold limit
+    (rwpend_driver/PROTOCOL.md): the pulse then arrives in fragments, and the pendulum's small
+    move is no sign of a wiring fault."""
+    if not commanded:
+        return None
+    u0 = commanded[0]
+    n = 0
+    while n < len(commanded) and commanded[n] == u0:
+        n += 1
+    tol = 0.01 * abs(u0) + 0.01
+    got = sum(1 for x in held[:n + 3] if abs(x - u0) <= tol)
+    if got >= 0.8 * n:
+        return None
+    return (f'the pulse of u = {u0:g} did not reach the motor whole: the plant held it for {got} of the '
+            f'{n} samples commanded (this PC fell behind the sample rate and the commands came late); '
+            'run it again with less load on this PC')
+
+
 def direction_problem(u0: float, d_pendulum: float, d_rotor: float, count: float) -> str | None:
     """Encoder and motor directions from the first torque pulse of sign ``u0``: by (2.15) the
     rotor turns with u (theta_r'' = b_r (u - F)) and the pendulum against it

@@ -14,7 +14,7 @@ import numpy as np
 from rwpend_control.supervisor import STALE_FAULT
 from rwpend_model.plant import Plant
 
-from .checks import Rest, direction_problem, rest_problem
+from .checks import delivery_problem, Rest, direction_problem, rest_problem
 
 
 class IdentError(Exception):
@@ -91,6 +91,16 @@ def check_directions(name: str, rig, d, k0: int, u0: float) -> None:
     """The encoder and motor directions from the first pulse (rwpend_ident.checks)."""
     dl = rig.count_angle
     seg = slice(k0, min(d.n, k0 + int(round(0.3 / rig.sample_period))))
+    held = getattr(d, 'u_held', None)
+    if held is not None and not np.all(np.isnan(held)):
+        # the controller's commands from the first it sent for the pulse, against what was held
+        c = np.nan_to_num(d.u)
+        first = np.nonzero(np.abs(c) > 0)[0]
+        if first.size:
+            k1 = int(first[0])
+            why = delivery_problem(list(c[k1:seg.stop]), list(np.nan_to_num(held[k1:seg.stop])))
+            if why:
+                raise IdentError(f'{name}: {why}')
     dp = d.pc[seg] - d.pc[k0]
     dm = d.mc[seg] - d.mc[k0]
     why = direction_problem(u0, float(dp[np.argmax(np.abs(dp))]) * dl, float(dm[np.argmax(np.abs(dm))]) * dl, dl)

@@ -101,3 +101,14 @@ def test_breakaway_ramps_refuse_a_blocked_wheel():
 
 def test_not_ready_is_an_exception_with_the_reason():
     assert issubclass(NotReady, Exception) and str(NotReady('why')) == 'why'
+
+
+def test_a_pulse_that_did_not_reach_the_motor_is_said_so():
+    from rwpend_ident.checks import delivery_problem
+    pulse = [6.0] * 30 + [0.0] * 10
+    assert delivery_problem(pulse, [0.0] + [6.0] * 30 + [0.0] * 9) is None          # one sample later: whole
+    assert delivery_problem(pulse, [5.998] * 30 + [0.0] * 10) is None               # quantized by the amplifier
+    fragments = [0.0] * 6 + [6.0] * 3 + [0.0] * 6 + [6.0] * 3 + [0.0] * 22           # the device's hold limit
+    why = delivery_problem(pulse, fragments)
+    assert 'did not reach the motor whole' in why and '6 of the 30' in why
+    assert delivery_problem([], []) is None
