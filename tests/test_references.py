@@ -122,8 +122,8 @@ def _resolve(ref: str, here: Path) -> Path | None:
 
 def _is_repo_path(ref: str, here: Path) -> bool:
     first = ref.split('/')[0]
-    if first in ('.', '..'):
-        return True
+    if first in ('.', '..'):                      # a path that leaves the repository is not one of its files
+        return (here / ref).resolve().is_relative_to(ROOT)
     if any(part in GENERATED or part.endswith('_out') for part in ref.split('/')):
         return False
     return first in _tracked_top() or (here != ROOT and (here / first).exists()
