@@ -73,19 +73,18 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
 
 
 @pytest.mark.timeout(150)
-def test_bench_composed_layouts_in_real_time_lose_nothing(tmp_path, ros_env):
-    """The composed layouts in real time (the only runs that exercise them there): in ``control``
-    the estimator takes the command of its controller through the in-process bus, deferred
-    until its own callback returns; in ``composed`` the simulator's sample loop hands the
-    sample to the estimator of its process (rwpend_ros.intra). Each answers its samples and
-    the recorder loses nothing."""
+def test_bench_control_layout_in_real_time_loses_nothing(tmp_path, ros_env):
+    """The control layout in real time (the only run that exercises it there): the estimator
+    and the controller as the loop of their process, one step per ``encoders`` message
+    (rwpend_loop.control), the plant in its own. It answers its samples and the recorder loses
+    nothing."""
     out = tmp_path / 'bench'
     p = subprocess.run([RWPEND, 'bench', '--duration', '3', '--h', '0.001', '--no-lockstep', '--no-decode', '--no-scale',
-                        '--no-rig', '--layout', 'control', '--layout', 'composed', '-o', str(out)], env=ros_env,
+                        '--no-rig', '--layout', 'control', '-o', str(out)], env=ros_env,
                        capture_output=True, text=True, timeout=140)
     assert p.returncode == 0, f'{p.stdout[-3000:]}\n{p.stderr[-3000:]}'
     res = json.loads((out / 'bench.json').read_text())
-    assert [r['layout'] for r in res['realtime']] == ['control', 'composed']
+    assert [r['layout'] for r in res['realtime']] == ['control']
     for rt in res['realtime']:
         assert rt['samples'] > 1000, rt
         assert all(c in (0, -2, 130) for c in rt['exit_codes'].values()), rt['exit_codes']

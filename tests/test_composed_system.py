@@ -1,10 +1,11 @@
-"""System tests of the composed mode (``./rwpend up --composed``): plant, estimator and controller
-as nodes of one process on one executor, the recorder in its own process.
+"""System tests of the layouts of ``./rwpend up --composed``: the control process (estimator and
+controller as the nodes of one loop process fed by the ``encoders`` topic, rwpend_loop.control),
+the plant and the recorder in processes of their own; and the loop layout, the default.
 
-* a lockstep run swings up (theta reaches pi) and every node got its own overrides from the one
-  params file of the process (``/**/<node>`` sections);
-* the composed process gives the same bag as separate processes (lockstep is deterministic
-  whatever the layout: rwpend_bag.sameness).
+* a lockstep run of the control layout swings up (theta reaches pi) and every node got its own
+  overrides from the one params file of the process (``/**/<node>`` sections);
+* every layout gives the same bag (lockstep is deterministic whatever the layout:
+  rwpend_bag.sameness).
 """
 from __future__ import annotations
 
@@ -37,14 +38,14 @@ def wrapped(theta):
 
 
 @pytest.mark.timeout(60)
-def test_composed_lockstep_swings_up(tmp_path, ros_env):
-    bag = tmp_path / 'composed'
-    p, _ = up(['--composed', '--lockstep', '--mode', 'auto', '--duration', '6', '--record', str(bag),
+def test_control_layout_lockstep_swings_up(tmp_path, ros_env):
+    bag = tmp_path / 'control'
+    p, _ = up(['--composed', 'control', '--lockstep', '--mode', 'auto', '--duration', '6', '--record', str(bag),
                '--set', 'estimator.publish_joint_states=false', '--set', 'controller.status_every=20'],
               ros_env)
-    # one process holds the three nodes: their log lines carry its prefix, not theirs
+    # one process holds the estimator and the controller: their log lines carry its prefix
     prefixes = {line.split(']', 1)[0].strip('[ ') for line in p.stdout.splitlines() if line.startswith('[')}
-    assert prefixes == {'stack', 'recorder'}, prefixes
+    assert prefixes == {'sim', 'control', 'recorder'}, prefixes
     for name in ('rwpend.sim', 'rwpend.estimator', 'rwpend.controller'):
         assert f'[{name}]' in p.stdout, f'node {name} not running under its own name'
     b = read_bag(bag)
@@ -63,26 +64,25 @@ def test_composed_lockstep_swings_up(tmp_path, ros_env):
     x = wrapped(truth['theta'])
     assert np.abs(x).min() < 0.05, f'never near upright: min |theta - pi| = {np.abs(x).min():.3f}'
     assert np.all(np.abs(cmd['u']) <= 10.0) and np.all(np.isfinite(cmd['u']))
-    # state reached the controller through the process's in-process bus
+    # the samples came through the control process's order gate, the state stayed inside it
     from test_safety_system import diagnostics
-    last = [values['state_order'] for _, name, _, _, values in diagnostics(bag)
-            if 'state_order' in values][-1]
-    assert 'in-process' in last and 'duplicates 0, stale 0' in last, last
-    delivered = int(last.split('in-process ')[1].split()[0])
-    assert delivered > 5000, last
+    values = [v for _, name, _, _, v in diagnostics(bag) if 'encoders_order' in v][-1]
+    assert 'duplicates 0, stale 0' in values['encoders_order'], values
+    last = [v['state_order'] for _, name, _, _, v in diagnostics(bag) if 'state_order' in v][-1]
+    assert last == 'in the loop', last
 
 
 @pytest.mark.timeout(90)
-def test_composed_equals_separate_in_lockstep(tmp_path, ros_env):
-    """Bit for bit, with the in-process bus (rwpend_ros.intra) carrying state and command
-    between the composed nodes, and with estimator + controller composed, plant separate."""
+def test_every_layout_gives_the_same_bag_in_lockstep(tmp_path, ros_env):
+    """Bit for bit: the loop in one process (the default), estimator + controller in one loop
+    process with the plant separate, and every node a process of its own."""
     bags = {}
-    layouts = {'composed': ['--composed'], 'control': ['--composed', 'control'], 'separate': ['--composed', 'none']}
+    layouts = {'loop': [], 'control': ['--composed', 'control'], 'separate': ['--composed', 'none']}
     for layout, extra in layouts.items():
         bags[layout] = tmp_path / layout
         args = ['--lockstep', '--mode', 'auto', '--duration', '2', '--record', str(bags[layout])]
         up(args + extra, ros_env, timeout=28)
-    for other in ('composed', 'control'):
+    for other in ('loop', 'control'):
         _same_run(read_bag(bags[other]), read_bag(bags['separate']))
         assert sameness.compare(bags[other], bags['separate']) == [], other
 
@@ -94,4 +94,4 @@ def _same_run(a, b):
         ca, cb = answers(_decode(a, topic)), answers(_decode(b, topic))
         assert np.array_equal(ca['seq'], cb['seq']) and len(ca['seq']) == 2000
         for f in fields:
-            assert np.array_equal(ca[f], cb[f]), f'{topic}.{f}: composed and separate differ'
+            assert np.array_equal(ca[f], cb[f]), f'{topic}.{f}: the layouts differ'

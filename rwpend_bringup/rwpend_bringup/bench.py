@@ -5,9 +5,9 @@ from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` r
 ``--rt-priority 50 --cpu-latency 0`` unless told otherwise; PERFORMANCE.md, "What each mechanism
 buys"):
 
-1. **real time**, for each sample period h (default 1 ms and 0.5 ms) and each layout (separate
-   processes; ``control``: estimator and controller in one process, ``up --composed control``;
-   ``composed``: plant, estimator and controller in one process, ``up --composed``): simulator on
+1. **real time**, for each sample period h (default 1 ms and 0.5 ms) and each layout (``loop``:
+   the default of ``up``, the loop in one thread of one process; separate processes;
+   ``control``: estimator and controller in one loop process, ``up --composed control``): simulator on
    the wall clock, estimator, controller in ``auto`` (swing-up, catch, balance), recorder. The
    measured window opens ``SETTLE_S`` s after the start (the loop is running by then) and lasts
    ``--duration`` s (default 60). From the bag, over the samples whose instant lies in the window:
@@ -41,7 +41,7 @@ buys"):
 3. **bag decode** throughput of rwpend_bag's reader (read + column-wise CDR decode of the
    biggest real-time bag): messages/s.
 4. **scale** (issue 22): how many simulated rigs at 1 kHz the machine carries -- 1, 2, 3 ... rigs
-   in real time at once (``--scale-layout``, default composed: one process per rig; no recorder;
+   in real time at once (``--scale-layout``, default loop: one process per rig; no recorder;
    each rig its own namespace /scaleN and domain id, as a lab separates them), ``--scale-duration``
    s measured at each step, until the late fraction at the plants (from the traces: command k
    received after the instant of sample k+1, or never, over every rig's samples) passes 0.1 %
@@ -73,7 +73,7 @@ from .launch import Launcher
 DEFAULT_PERIODS = (0.001, 0.0005)
 #: bench layouts -> ./rwpend up arguments
 LAYOUT_ARGS = {'loop': ['--composed', 'loop'], 'separate': ['--composed', 'none'],
-               'control': ['--composed', 'control'], 'composed': ['--composed', 'all']}
+               'control': ['--composed', 'control']}
 #: ``--pin`` of the real-time runs by default (when CPUs 0 and 1 are usable): separate processes
 #: only, the simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free.
 #: Measured (PERFORMANCE.md, "What each mechanism buys"): lower median latency in 10 of 10
@@ -245,7 +245,6 @@ def machine_info() -> dict:
     return {'cpus': os.cpu_count(), 'cpus_usable': affinity, 'cpu_model': model,
             'kernel': platform.release(), 'python': platform.python_version(),
             'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp'),
-            'executor': os.environ.get('RWPEND_EXECUTOR', 'events'),
             'transport': transport_choice(),
             'loadavg_start': _loadavg()}
 
@@ -900,9 +899,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--layout', action='append', default=None, choices=(*LAYOUT_ARGS, 'both', 'all'),
                    help='loop: the loop in one thread of one process (the default of up, '
                    'rwpend_loop.host); separate: every node its own process; control: estimator and '
-                   'controller in one process, the plant in its own (up --composed control); composed: '
-                   'plant, estimator and controller on the in-process bus (up --composed all); '
-                   'repeatable; both = separate and composed, all = the four (default)')
+                   'controller in one loop process fed by the encoders topic, the plant in its own (up '
+                   '--composed control); repeatable; both = loop and separate, all = the three (default)')
     p.add_argument('--lockstep-duration', type=float, default=None,
                    help='simulated seconds of each lockstep run (default 12; 4 with --quick)')
     p.add_argument('--no-realtime', action='store_true', help='skip the real-time runs')
@@ -917,8 +915,8 @@ def _parser() -> argparse.ArgumentParser:
                    'the late fraction at the plants passes 0.1 %%')
     p.add_argument('--scale-duration', type=float, default=None, metavar='S',
                    help='wall seconds measured at each step of the scale run (default 20; 8 with --quick)')
-    p.add_argument('--scale-layout', default='composed', choices=tuple(LAYOUT_ARGS),
-                   help='the layout of each rig of the scale run (default composed: one process '
+    p.add_argument('--scale-layout', default='loop', choices=tuple(LAYOUT_ARGS),
+                   help='the layout of each rig of the scale run (default loop: one process '
                    'per rig, the cheapest)')
     p.add_argument('--domain-id', type=int, default=None,
                    help='ROS_DOMAIN_ID of the runs (default: the environment\'s, else 60)')
@@ -959,7 +957,7 @@ def main(argv=None) -> int:
         return 2
     layouts = []
     for name in a.layout or ['all']:
-        for x in {'both': ['separate', 'composed'], 'all': list(LAYOUT_ARGS)}.get(name, [name]):
+        for x in {'both': ['loop', 'separate'], 'all': list(LAYOUT_ARGS)}.get(name, [name]):
             if x not in layouts:
                 layouts.append(x)
     out = Path(a.out) if a.out else ROOT / 'bench_out'

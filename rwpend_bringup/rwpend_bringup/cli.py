@@ -46,9 +46,10 @@ NODE_MODULES = {
     'controller': 'rwpend_control.controller_node',
     'driver': 'rwpend_driver.driver_node',
 }
-#: ``--composed`` values: which nodes share one process (rwpend_bringup.composed); ``loop``: the
-#: plant, estimator, controller and recorder in the loop's process (rwpend_loop.host)
-COMPOSITIONS = ('loop', 'all', 'control')
+#: ``--composed`` values: which nodes share the loop's process (rwpend_loop.host); ``loop``: the
+#: plant, estimator, controller and recorder; ``control``: the estimator and the controller,
+#: fed by the plant's ``encoders`` topic (rwpend_loop.control), the plant in a process of its own
+COMPOSITIONS = ('loop', 'control')
 #: ./rwpend up --lockstep --record: samples the simulator may run ahead of the recorder
 LOCKSTEP_RECORDER_WINDOW = 50
 #: ./rwpend up in real time: the loop's SCHED_FIFO priority where permitted (--rt-priority)
@@ -58,8 +59,7 @@ DEFAULT_LAYOUT = {'sim': 'loop', 'serial': 'loop'}
 LAYOUT_TEXT = {'loop': 'the loop in one real-time thread of one process (plant, estimator, controller '
                        'and the recorder as its nodes)',
                'none': 'separate processes (plant, estimator, controller)',
-               'control': 'estimator + controller in one process, the plant in its own',
-               'all': 'plant, estimator and controller in one process'}
+               'control': 'estimator + controller in one loop process, the plant in its own'}
 
 
 class Parser(argparse.ArgumentParser):
@@ -210,27 +210,27 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    'see PERFORMANCE.md')
     p.add_argument('--pin', action='append', default=[], metavar='PROCESS=CPUS',
                    help='CPU affinity of one process of the stack (repeatable; overrides --cpus for '
-                   'it): sim, driver, estimator, controller, control (--composed control), stack '
-                   '(--composed) or recorder, on the CPUs CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
+                   'it): loop, sim, driver, estimator, controller, control (--composed control) or '
+                   'recorder, on the CPUs CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
                    '--pin sim=0 --pin estimator=0 --pin controller=1 took 12-57 us off the median '
                    'loop latency of separate processes (PERFORMANCE.md, "What each mechanism buys")')
     p.add_argument('--console', nargs='?', const='8080', default=None, metavar='[LISTEN:]PORT',
                    help='also run the lab console (./rwpend console: the rig in a browser, and the '
                    'Foxglove bridge on 8765), on 127.0.0.1:8080 unless given; in lockstep sample 0 waits '
                    'until its page is open, so the page shows the run from its start')
-    p.add_argument('--composed', nargs='?', const='all', default=None, choices=COMPOSITIONS + ('none',),
-                   help='nodes in one process on one executor: "all" (the default of a bare '
-                   '--composed): plant (simulator), estimator and controller; "control": estimator '
-                   'and controller, the plant (simulator or driver) in its own process, like '
-                   'ros2_control separates hardware from controllers; "loop" (the default on the '
-                   'simulator): the three in one process around one loop thread, the recorder too. '
-                   'Otherwise the recorder stays a process of its own; see PERFORMANCE.md')
+    p.add_argument('--composed', nargs='?', const='loop', default=None, choices=COMPOSITIONS + ('none',),
+                   help='the nodes of the loop\'s process: "loop" (the default, also of a bare '
+                   '--composed): plant (simulator or driver), estimator, controller and the recorder '
+                   'around one loop thread; "control": estimator and controller, fed by the plant\'s '
+                   'encoders topic, the plant in a process of its own (the default of --only: a stack '
+                   'split across hosts); "none": each node a process of its own. See '
+                   'docs/architecture.md')
     p.add_argument('--only', default=None, metavar='PROCESS[,PROCESS...]',
                    help='run only these processes of the stack, on this host (the others run on other '
-                   'hosts of the network with the same up arguments): sim or driver, estimator, '
-                   'controller, control (--composed control), stack (--composed) or recorder; e.g. '
-                   'the rig PC --only sim, a laptop --only control, a console --only recorder. '
-                   'See docs/network.md.')
+                   'hosts of the network with the same up arguments): sim or driver, control '
+                   '(estimator and controller), recorder (estimator and controller with --composed '
+                   'none); e.g. the rig PC --only sim, a laptop --only control, a console --only '
+                   'recorder. See docs/network.md.')
 
 
 def usable_cpus() -> set[int]:
@@ -274,18 +274,16 @@ def choose_defaults(a) -> list[str]:
     notes = []
     plant = 'sim' if a.plant == 'sim' else 'serial'
     if getattr(a, 'composed', None) is True:      # a caller's boolean (the flag before it took a value)
-        a.composed = 'all'
+        a.composed = 'loop'
     given = getattr(a, 'composed', None)
     layout = given or DEFAULT_LAYOUT[plant]
     if given is None and getattr(a, 'only', None) and layout == 'loop':
         # a stack split across hosts (--only sim / control / recorder): the plant in a process
         # of its own, the estimator and the controller in another
         layout = 'control'
-    if layout == 'all' and plant != 'sim':
-        layout = 'control' if given is None else layout
     a.composed = None if layout == 'none' else layout
     notes.append(f'layout: {LAYOUT_TEXT[layout]}' + ('' if given else f' (the default for --plant {plant}; '
-                                                      '--composed loop|all|control|none to change)'))
+                                                      '--composed loop|control|none to change)'))
     prio = getattr(a, 'rt_priority', None)
     if prio is None:
         if a.lockstep:
@@ -310,12 +308,10 @@ def lockstep_controller_id(ns: str) -> int:
 
 def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     """Node specs and params files from the ``up`` arguments; raises ValueError with the reason
-    (also for a bad ``RWPEND_TRANSPORT`` or ``RWPEND_INTRA_PROCESS``: refused here, before any
-    process starts). Call :func:`choose_defaults` first."""
-    from rwpend_ros import intra
+    (also for a bad ``RWPEND_TRANSPORT``: refused here, before any process starts). Call
+    :func:`choose_defaults` first."""
     from rwpend_ros.transport import transport_choice
     transport_choice()
-    intra.enabled()
     params: dict[str, dict] = {'sim': {}, 'estimator': {}, 'controller': {}, 'driver': {}}
     rig: dict = {}
     for f in a.params:
@@ -418,27 +414,13 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         specs.append(NodeSpec('recorder', 'rwpend_bag.cli', args=rec_args, ros_args=False, stop_rank=9))
     composed = getattr(a, 'composed', None)
     if composed is True:      # a caller's boolean (the flag before it took a value)
-        composed = 'all'
-    if composed == 'none':
-        composed = None
+        composed = 'loop'
+    if composed not in (None, 'none', *COMPOSITIONS):
+        raise ValueError(f'--composed must be one of {", ".join(COMPOSITIONS)} or none, got {composed!r}')
     if composed == 'loop':
         specs = loop_layout(specs, a)
-    elif composed:
-        if composed not in COMPOSITIONS:
-            raise ValueError(f'--composed must be one of {", ".join(COMPOSITIONS)}, got {composed!r}')
-        if composed == 'all' and plant != 'sim':
-            raise ValueError('--composed all needs the simulator (--plant sim): the driver runs in '
-                             'its own process (--composed control keeps it there)')
-        members = ('sim', 'estimator', 'controller') if composed == 'all' else ('estimator', 'controller')
-        nodes = [s for s in specs if s.name in members and s.module == NODE_MODULES[s.name]]
-        name = 'stack' if composed == 'all' else 'control'
-        first = specs.index(nodes[0])
-        rest = [s for s in specs if s not in nodes]
-        specs = [*rest[:first],
-                 NodeSpec(name, 'rwpend_bringup.composed', args=[s.name for s in nodes],
-                          node_params={s.name: s.params for s in nodes},
-                          stop_rank=min(s.stop_rank for s in nodes)),
-                 *rest[first:]]
+    elif composed == 'control':
+        specs = control_layout(specs)
     prio = getattr(a, 'rt_priority', 0) or 0
     if not 0 <= prio <= 99:
         raise ValueError(f'--rt-priority must be in 0..99, got {prio}')
@@ -502,6 +484,28 @@ def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
     host = NodeSpec('loop', 'rwpend_loop.host', args=args, node_params={s.name: s.params for s in members},
                     stop_rank=min(s.stop_rank for s in members))
     return [host, *rest]
+
+
+def control_layout(specs: list[NodeSpec]) -> list[NodeSpec]:
+    """The estimator and controller of ``specs`` as the nodes of one loop process without the
+    plant (rwpend_loop.control: one loop step per ``encoders`` message); the plant and the
+    recorder stay processes of their own."""
+    members = [s for s in specs if s.name in ('estimator', 'controller') and s.module == NODE_MODULES[s.name]]
+    if not members:
+        return specs
+    first = specs.index(members[0])
+    rest = [s for s in specs if s not in members]
+    if len(members) == 1:            # --no-controller: the estimator alone, a node process of its own
+        host = NodeSpec('control', members[0].module, node_params={members[0].name: members[0].params},
+                        stop_rank=members[0].stop_rank)
+    else:
+        for plant in specs:         # the controller takes the state inside its process: not a subscriber
+            if plant.name == 'sim' and plant.params.get('start.state_subscribers', 0) > 0:
+                plant.params['start.state_subscribers'] -= 1
+        host = NodeSpec('control', 'rwpend_loop.host', args=[s.name for s in members],
+                        node_params={s.name: s.params for s in members},
+                        stop_rank=min(s.stop_rank for s in members))
+    return [*rest[:first], host, *rest[first:]]
 
 
 def select_part(specs: list[NodeSpec], only: str | None) -> list[NodeSpec]:
@@ -633,7 +637,7 @@ def judge_run(a, specs, exit_codes: dict, status: int, wall_s: float, interrupte
     h = next((float(s.params['rig.sample_period']) for s in specs if 'rig.sample_period' in s.params),
              None) or _rig_sample_period()
     expected = expected_samples(h, a.duration, a.lockstep, wall_s, interrupted)
-    if not a.duration and not names & {'sim', 'driver', 'stack', 'loop'}:
+    if not a.duration and not names & {'sim', 'driver', 'loop'}:
         # a host without the plant (up --only recorder): its own wall time says nothing of the
         # plant's samples
         expected = None

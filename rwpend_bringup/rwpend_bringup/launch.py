@@ -42,7 +42,7 @@ class NodeSpec:
     ros_args: bool = True                      # pass --ros-args (False for plain programs)
     stop_rank: int = 1                         # lower stops first
     required: bool = True                      # the stack stops when this one exits
-    #: a process holding several nodes (``--composed``): {node name: overrides}; each node gets
+    #: a process of the loop's nodes (rwpend_loop.host): {node name: overrides}; each node gets
     #: its own ``/**/<node>`` section in the overrides file and no ``__node`` remap is given
     #: (it would rename every node of the process)
     node_params: dict | None = None

@@ -25,7 +25,7 @@ from .netlab import Host, NetLab
 ROOT = Path(__file__).resolve().parents[2]
 RWPEND = str(ROOT / 'rwpend')
 #: the names of ``--only`` that run the plant (they end by themselves at ``--duration``)
-PLANT_PROCESSES = ('sim', 'driver', 'stack')
+PLANT_PROCESSES = ('sim', 'driver', 'loop')
 
 
 def lab_env(domain_id: int, base: dict | None = None) -> dict:

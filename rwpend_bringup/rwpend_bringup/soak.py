@@ -6,7 +6,8 @@ injected on a schedule:
 
 * ``stop``: SIGSTOP, then SIGCONT after the given time, of the process that holds the estimator
   (the loop layout, the default: the loop's process, simulator included; separate: the
-  estimator; ``--composed control``: estimator + controller; ``--composed``: the whole stack) -- a stalled or preempted node, a laptop that sleeps;
+  estimator; ``--composed control``: the loop process of estimator + controller) -- a stalled or
+  preempted node, a laptop that sleeps;
 * ``stall-recorder``: the same for the process that writes the bag -- a slow disk;
 * ``drop``: a share of the UDP datagrams dropped (nftables, inside the run's own network
   namespace; skipped with the reason where that is not possible).
@@ -35,18 +36,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(os.environ.get('RWPEND_ROOT', Path(__file__).resolve().parents[2]))
-LAYOUTS = {'loop': ['--composed', 'loop'], 'separate': ['--composed', 'none'], 'control': ['--composed', 'control'],
-           'composed': ['--composed']}
+LAYOUTS = {'loop': ['--composed', 'loop'], 'separate': ['--composed', 'none'], 'control': ['--composed', 'control']}
 #: the process holding the estimator, by layout (a substring of its command line)
 ESTIMATOR_PROCESS = {'loop': 'rwpend_loop.host sim estimator controller',
                      'separate': 'rwpend_estimation.estimator_node',
-                     'control': 'rwpend_bringup.composed estimator controller',
-                     'composed': 'rwpend_bringup.composed sim estimator controller'}
+                     'control': 'rwpend_loop.host estimator controller'}
 
 #: the process writing the bag, by layout: the loop's process hands the bytes to a child of its
 #: own (rwpend_bag.procwriter, found by its process name); the others run ./rwpend record
 RECORDER_PROCESS = {'loop': 'rwpend-bag', 'separate': 'rwpend_bag.cli record',
-                    'control': 'rwpend_bag.cli record', 'composed': 'rwpend_bag.cli record'}
+                    'control': 'rwpend_bag.cli record'}
 
 
 @dataclass(frozen=True)
@@ -265,7 +264,7 @@ def summary(results: list[dict]) -> str:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog='rwpend soak', description=__doc__.split('\n\n')[0])
     p.add_argument('--short', action='store_true', help=f'the short version ({SHORT[0]:g} s, one fault)')
-    p.add_argument('--layouts', default=','.join(LAYOUTS), help='comma-separated: loop, separate, control, composed')
+    p.add_argument('--layouts', default=','.join(LAYOUTS), help='comma-separated: loop, separate, control')
     p.add_argument('--duration', type=float, default=None, help='s per run (default: the scenario\'s)')
     p.add_argument('--no-load', action='store_true', help='no busy loops')
     p.add_argument('-o', '--out', default=str(ROOT / 'soak_out'), help='output directory (default soak_out)')

@@ -34,7 +34,7 @@ def test_cpus_without_recorder_part_leaves_the_recorder_free():
 
 def test_cpus_composed():
     s = specs_of('--composed', '--cpus', '0')
-    assert s['stack'].env['RWPEND_CPUS'] == '0'
+    assert s['loop'].env['RWPEND_CPUS'] == '0'
 
 
 @pytest.mark.parametrize('bad', ['x', ':0', '1:y', str(os.cpu_count() or 1), '0,,1', '-1'])
@@ -44,20 +44,31 @@ def test_bad_cpus_refused(bad):
 
 
 def test_composed_layouts():
-    s = specs_of('--composed', 'all', '--record', NO_BAG, '--rt-priority', '50')
-    assert list(s) == ['stack', 'recorder'] and s['stack'].args == ['sim', 'estimator', 'controller']
-    assert s['stack'].env['RWPEND_RT_PRIORITY'] == '50'
+    s = specs_of('--composed', '--record', NO_BAG, '--rt-priority', '50')
+    assert list(s) == ['loop'] and s['loop'].args[:3] == ['sim', 'estimator', 'controller']
+    assert s['loop'].module == 'rwpend_loop.host' and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
     c = specs_of('--composed', 'control', '--plant', 'serial:/dev/ttyUSB0', '--rt-priority', '50')
     assert list(c) == ['driver', 'control'] and c['control'].args == ['estimator', 'controller']
+    assert c['control'].module == 'rwpend_loop.host'
     assert c['control'].stop_rank < c['driver'].stop_rank, 'the controller stops before the plant'
     assert set(c['control'].node_params) == {'estimator', 'controller'}
     assert c['driver'].env['RWPEND_RT_PRIORITY'] == c['control'].env['RWPEND_RT_PRIORITY'] == '50'
-    assert list(specs_of('--composed', 'control', '--no-controller')) == ['sim', 'control']
+    e = specs_of('--composed', 'control', '--no-controller')
+    assert list(e) == ['sim', 'control'] and e['control'].module == 'rwpend_estimation.estimator_node'
 
 
-def test_composed_all_refuses_the_driver():
-    with pytest.raises(ValueError, match='--composed control'):
-        specs_of('--composed', '--plant', 'serial:/dev/ttyUSB0')
+def test_control_layout_starts_the_lockstep_simulator_without_a_state_subscriber():
+    """The controller of the control process takes the state inside it: the simulator must not
+    wait for it to subscribe (it would wait for ever)."""
+    loop = specs_of('--lockstep', '--composed', 'none')['sim'].params['start.state_subscribers']
+    assert specs_of('--lockstep', '--composed', 'control')['sim'].params['start.state_subscribers'] == loop - 1
+
+
+@pytest.mark.parametrize('gone', ['all', 'stack'])
+def test_a_layout_that_is_not_one_is_refused(capsys, gone):
+    with pytest.raises(SystemExit):
+        specs_of('--composed', gone)
+    assert 'invalid choice' in capsys.readouterr().err
 
 
 def test_bad_composed_value_refused(capsys):
@@ -80,7 +91,7 @@ def test_cpu_latency_must_be_an_integer(capsys):
     assert e.value.code == 2 and '--cpu-latency' in capsys.readouterr().err
 
 
-@pytest.mark.parametrize('name, bad', [('RWPEND_TRANSPORT', 'tcp'), ('RWPEND_INTRA_PROCESS', 'off')])
+@pytest.mark.parametrize('name, bad', [('RWPEND_TRANSPORT', 'tcp')])
 def test_bad_environment_switch_refused_before_anything_starts(monkeypatch, name, bad):
     monkeypatch.setenv(name, bad)
     with pytest.raises(ValueError, match=name):
@@ -124,10 +135,10 @@ def test_bench_pins_of_the_real_time_runs(monkeypatch):
     monkeypatch.setattr(cli, 'usable_cpus', lambda: {0, 1})
     assert bench.realtime_pins(None, ['separate', 'control']) == {'separate': ('sim=0', 'estimator=0', 'controller=1')}
     assert bench.realtime_pins(['none'], ['separate']) == {}
-    assert bench.realtime_pins(['sim=1', 'stack=0'], ['separate', 'control', 'composed']) == {
-        'separate': ('sim=1',), 'control': ('sim=1',), 'composed': ('stack=0',)}
-    with pytest.raises(ValueError, match="no process 'stack'"):
-        bench.realtime_pins(['stack=0'], ['separate'])
+    assert bench.realtime_pins(['sim=1', 'loop=0'], ['separate', 'control', 'loop']) == {
+        'separate': ('sim=1',), 'control': ('sim=1',), 'loop': ('loop=0',)}
+    with pytest.raises(ValueError, match="no process 'loop'"):
+        bench.realtime_pins(['loop=0'], ['separate'])
     monkeypatch.setattr(cli, 'usable_cpus', lambda: {0})          # one CPU: nothing pinned
     assert bench.realtime_pins(None, ['separate']) == {}
     monkeypatch.setattr(cli, 'usable_cpus', lambda: {2, 3})       # not CPUs 0 and 1: nothing either
@@ -230,7 +241,7 @@ def test_defaults_lockstep_at_ordinary_priority_explicit_choices_kept(monkeypatc
     assert a.rt_priority == 0 and a.composed is None and {'sim', 'estimator', 'controller'} <= set(s)
     assert not any('real-time priority' in n for n in notes)
     a, s, _ = defaults_of('--composed')
-    assert a.composed == 'all' and 'stack' in s
+    assert a.composed == 'loop' and list(s) == ['loop']
     a, s, _ = defaults_of('--plant', 'serial:/dev/null')
     assert a.composed == 'loop' and list(s) == ['loop'] and s['loop'].args == ['driver', 'estimator', 'controller']
 
@@ -316,8 +327,6 @@ def test_the_loop_layout_is_the_default_on_the_rig(monkeypatch, tmp_path):
     assert s['loop'].node_params['driver']['start.encoders_subscribers'] == 2
     assert s['loop'].node_params['driver']['port'] == '/dev/null'
     assert s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
-    # split across hosts, and the older layouts on request
+    # split across hosts, and the other layouts on request
     assert set(defaults_of('--plant', 'serial:/dev/null', '--only', 'driver')[1]) == {'driver'}
     assert defaults_of('--plant', 'serial:/dev/null', '--composed', 'control')[0].composed == 'control'
-    with pytest.raises(ValueError, match='needs the simulator'):
-        defaults_of('--plant', 'serial:/dev/null', '--composed', 'all')

@@ -28,7 +28,7 @@ def test_in_lockstep_the_run_waits_for_the_page():
     assert s['console'].required and s['console'].args == ['--ns', '/rig2', '--listen', '0.0.0.0', '--port', '9000']
     assert s['console'].env == {'RWPEND_RT_PRIORITY': '0'}, 'lockstep: ordinary priority'
     composed = specs_of('--lockstep', '--composed', '--console')
-    assert composed['stack'].node_params['sim']['start.state_subscribers'] == without + 1
+    assert composed['loop'].node_params['sim']['start.state_subscribers'] == without + 1
 
 
 @pytest.mark.parametrize('bad', ['port', '0.0.0.0:', '1.2.3.4.5:80', '70000'])

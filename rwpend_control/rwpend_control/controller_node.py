@@ -63,7 +63,7 @@ from rwpend_ros import wire
 from rwpend_ros.claim import format_id
 from rwpend_ros.trace import tracer
 from rwpend_ros.diagnostics import publish_diagnostic
-from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, local_subscription
+from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS
@@ -85,14 +85,18 @@ def _time_msg(t: float) -> Time:
 
 
 class ControllerNode(RwNode):
-    def __init__(self, bus=None, hosted: bool = False, **node_kwargs) -> None:
-        """``bus``: the in-process bus of a composed process (rwpend_ros.intra), or the loop
-        lock of the loop's process; ``hosted``: the loop's process (rwpend_loop.host) runs
-        :attr:`ctrl` every sample and calls :meth:`publish_result` -- no ``state`` subscription
-        and no stale-state watchdog here (the state cannot stop coming inside the loop);
-        node_kwargs go to rclpy Node (context, parameter_overrides, namespace) for tests."""
+    def __init__(self, loop_lock=None, hosted: bool = False, plant_here: bool = True, **node_kwargs) -> None:
+        """``loop_lock``: the loop's lock when the loop's process hosts this node (rwpend_loop.host),
+        else None; ``hosted``: that process runs :attr:`ctrl` every sample and calls
+        :meth:`publish_result` -- no ``state`` subscription here; ``plant_here``: the plant is
+        a node of that process too (its e-stop comes as a call, and the state cannot stop
+        coming inside the loop: no stale-state watchdog); False when the plant is elsewhere
+        (rwpend_loop.control: the samples come from the ``encoders`` topic), then the e-stop
+        comes on ``estop/state`` and the watchdog runs as in a process of its own. node_kwargs
+        go to rclpy Node (context, parameter_overrides, namespace) for tests."""
         self.hosted = bool(hosted)
-        super().__init__('controller', bus=bus, **node_kwargs)
+        watched = not self.hosted or not plant_here
+        super().__init__('controller', loop_lock=loop_lock, **node_kwargs)
         self.param_table = ParameterTable(self)
         self.rig = declare_rig(self.param_table)
         self.sample_time = sample_time(self, self.param_table)   # lockstep: ROS time from the samples' stamps
@@ -142,12 +146,10 @@ class ControllerNode(RwNode):
         self._pending_params: list[Parameter] = []
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
-        # command reaches a simulator in this process directly (composed mode, rwpend_ros.intra)
-        self.pub_cmd = LocalPublisher(self, MotorCommand, 'command', QOS_CONTROL_PUB)
+        self.pub_cmd = self.create_publisher(MotorCommand, 'command', QOS_CONTROL_PUB)
         self.pub_status = self.create_publisher(ControllerStatus, 'controller/status', QOS_STATUS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         depth = p['state_queue_depth']
-        # also taken directly from an estimator in this process (composed mode, rwpend_ros.intra)
         self.sub_state = None if self.hosted else local_subscription(
             self, StateEstimate, 'state', self.on_state,
             QoSProfile(reliability=QOS_CONTROL_LATEST.reliability, history=QOS_CONTROL_LATEST.history,
@@ -155,14 +157,14 @@ class ControllerNode(RwNode):
         self.create_service(SetMode, '~/set_mode', self.on_set_mode)
         # the plant's e-stop as it is (latched, from the simulator or the driver); in the loop's
         # process the simulator calls on_estop_state itself, before the next sample (one path)
-        if not self.hosted:
+        if watched:
             self.create_subscription(Bool, 'estop/state', self.on_estop_state, QOS_LATCHED)
         # in the loop's slack: after the command of a sample, not while a state waits (19.)
         self.diag_timer = SlackTimer(self, 1.0, self.publish_diagnostics)
         self.create_timer(0.05, self._do_sync)
         # steady clock: fires while sim time stands still too (a stale state in lockstep shows
         # as sim time moving on without states; judged on the node's clock in _check_stale)
-        if not self.hosted:
+        if watched:
             self.create_timer(WATCHDOG_PERIOD, self._check_stale, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.cmd_msg = MotorCommand()
         self.last_status = None

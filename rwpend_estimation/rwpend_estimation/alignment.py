@@ -16,9 +16,8 @@ Rules
       samples before k - 1), sample k waits for command k - 1 -- until that command or sample
       k + 1 arrives, whichever is first.  With no command yet (start, plant restarted) the
       controller counts as having answered seq -1 when ``controller_present()`` says one
-      publishes: samples 1-3 then wait for the first commands too (in a composed lockstep run
-      sample 1 can come before command 0, rwpend_ros.intra).  So a lockstep run gives the same
-      estimates every time.
+      publishes: samples 1-3 then wait for the first commands too (sample 1 can come before
+      command 0 on another topic).  So a lockstep run gives the same estimates every time.
     * :meth:`command_for` picks by seq, not by arrival order: the command answering k - 1, else
       the newest answering an earlier sample (the amplifier holds it), else 0.  A replayed
       stream gives the live estimates whatever the interleaving of the two topics.

@@ -36,7 +36,7 @@ from rwpend_ros.sched import thread_priority_spec
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.diagnostics import publish_diagnostic
-from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, local_subscription
+from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS
@@ -93,17 +93,17 @@ RESET_QUIET_S = 0.5
 
 
 class EstimatorNode(RwNode):
-    def __init__(self, bus=None, hosted: bool = False, **node_kwargs) -> None:
-        """``bus``: the in-process bus of a composed process (rwpend_ros.intra), or the loop
-        lock of the loop's process; ``hosted``: the loop's process (rwpend_loop.host) steps the
-        estimator (:attr:`stage`) and calls :meth:`publish_estimate` -- no subscription of
-        ``encoders`` or ``command`` here; node_kwargs go to rclpy Node (e.g. context,
-        parameter_overrides, namespace) for tests."""
+    def __init__(self, loop_lock=None, hosted: bool = False, **node_kwargs) -> None:
+        """``loop_lock``: the loop's lock when the loop's process hosts this node
+        (rwpend_loop.host), else None; ``hosted``: that process steps the estimator
+        (:attr:`stage`) and calls :meth:`publish_estimate` -- no subscription of ``encoders``
+        or ``command`` here; node_kwargs go to rclpy Node (e.g. context, parameter_overrides,
+        namespace) for tests."""
         self.hosted = bool(hosted)
         #: the loop's estimator stage (rwpend_loop.loop.EstimatorStage) when hosted: it steps
         #: :attr:`est`, and is given the new one when the settings change
         self.stage = None
-        super().__init__('estimator', bus=bus, **node_kwargs)
+        super().__init__('estimator', loop_lock=loop_lock, **node_kwargs)
         self.param_table = ParameterTable(self)
         self.rig = declare_rig(self.param_table)
         self.sample_time = sample_time(self, self.param_table)   # lockstep: ROS time from the samples' stamps
@@ -128,17 +128,12 @@ class EstimatorNode(RwNode):
 
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
-        # state reaches a controller in this process directly (composed mode, rwpend_ros.intra)
-        self.pub_state = LocalPublisher(self, StateEstimate, 'state', QOS_CONTROL_PUB)
+        self.pub_state = self.create_publisher(StateEstimate, 'state', QOS_CONTROL_PUB)
         self.pub_joints = self.create_publisher(JointState, 'joint_states', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire): no message
-        # objects built or converted field by field (measured: PERFORMANCE.md). A command of a
-        # controller of this process comes through the in-process bus: published while this
-        # node publishes the state it answers, it is delivered right after that callback returns
-        # (rwpend_ros.intra: deferred). Encoders: from the sample loop of a simulator of this
-        # process (real time; in lockstep the simulator writes them to DDS, rwpend_sim.sim_node).
-        # Each subscription's order gate drops duplicates and older messages (rwpend_ros.order)
+        # objects built or converted field by field (measured: PERFORMANCE.md). Each
+        # subscription's order gate drops duplicates and older messages (rwpend_ros.order)
         self.sub_enc = self.sub_cmd = None
         if not self.hosted:
             self.sub_enc = local_subscription(self, EncoderCounts, 'encoders', self.on_encoders_raw, QOS_CONTROL)

@@ -36,8 +36,9 @@ def parser() -> argparse.ArgumentParser:
                    help='a short re-measurement: does the rig still match RIG.yaml, parameter by parameter?')
     p.add_argument('--set', action='append', default=[], metavar='NODE.PARAM=VALUE',
                    help='parameter override for every run, as for ./rwpend up')
-    p.add_argument('--composed', nargs='?', const='all', default=None, choices=('all', 'control'),
-                   help='run the nodes in one process, as ./rwpend up --composed')
+    p.add_argument('--composed', nargs='?', const='loop', default=None, choices=('loop', 'control', 'none'),
+                   help="the stack's layout, as ./rwpend up --composed (default: up's, the loop in one "
+                   'process)')
     return p
 
 

@@ -11,7 +11,7 @@ from .experiment import NEEDS, LabError, Options
 
 USAGE = """usage: rwpend lab list
        rwpend lab run N|N-M|all [--plant sim|serial:PORT] [--out DIR] [--set NODE.PARAM=VALUE ...]
-                                [--law FILE.py] [--composed [loop|all|control|none]]
+                                [--law FILE.py] [--composed [loop|control|none]]
        rwpend lab template N [-o FILE]
        rwpend lab report DIR... [-o OUT]"""
 
@@ -127,7 +127,7 @@ def run_main(argv) -> int:
                    "book's printed numbers)")
     p.add_argument('--law', default=None, metavar='FILE.py', help='your own law in place of the built-in one '
                    '(./rwpend lab template N writes a template)')
-    p.add_argument('--composed', nargs='?', const='all', default=None, choices=('loop', 'all', 'control', 'none'),
+    p.add_argument('--composed', nargs='?', const='loop', default=None, choices=('loop', 'control', 'none'),
                    help="the stack's layout, as ./rwpend up --composed (default: up's, the loop in one "
                    'process)')
     a = p.parse_args(argv)

@@ -69,7 +69,7 @@ def run_stack(run: Run, out: Path, sets, composed: str | None = None, log=None, 
     with open(runs_dir / f'{run.name}.log', 'w') as fh:
         launcher = Launcher(specs, namespace=a.ns, params_files=files, out=fh)
         status = launcher.run(120.0 + 20.0 * run.duration, until=_ticker(log, t0))
-    plant = {'loop': 'loop', 'all': 'stack'}.get(a.composed, 'sim')    # the process the simulator runs in
+    plant = 'loop' if a.composed == 'loop' else 'sim'    # the process the simulator runs in
     if status != 0 or launcher.reason != f'exited:{plant}':
         raise LabError(f'run {run.name}: the stack did not run to the end ({launcher.reason}); '
                        f'see {runs_dir / (run.name + ".log")}')

@@ -16,7 +16,9 @@ it as fast as the CPU goes, and the bag is the same every run.
 A node left out of the list runs elsewhere (another process or host): the loop then stops at
 the estimate (no controller here: ``state`` goes out, the command comes back on ``command``
 through the same gate, claimed) or at the encoders (no estimator either). In lockstep the loop
-waits for that command (the simulator's ``lockstep_timeout``, then u = 0, counted).
+waits for that command (the simulator's ``lockstep_timeout``, then u = 0, counted). The
+estimator and the controller without a plant (``estimator controller``) are the loop's process
+of the other side: :mod:`rwpend_loop.control`, one loop step per ``encoders`` message.
 
 ``--record DIR``: the recorder of every topic runs in this process, as rosbag2's composable
 recorder does: what the hosted nodes publish on the sample path goes into the bag as the bytes
@@ -48,10 +50,10 @@ RECORD_QUEUE_LIMIT = 20_000
 
 
 class LoopLock:
-    """The loop's lock, given to the hosted nodes in place of a bus
-    (:class:`rwpend_ros.nodes.LockedCallbacks`): their callbacks run holding it, and publishes go
-    straight to DDS. A condition on a re-entrant lock: the lockstep loop waits on it for an
-    external command."""
+    """The loop's lock, given to the hosted nodes (:class:`rwpend_ros.nodes.LockedCallbacks`):
+    their callbacks run holding it, so a parameter change or a service call applies between two
+    samples. A condition on a re-entrant lock: the lockstep loop waits on it for an external
+    command."""
 
     def __init__(self) -> None:
         self.lock = threading.Condition(threading.RLock())
@@ -59,18 +61,6 @@ class LoopLock:
     def call(self, owner, callback, *args, **kwargs):
         with self.lock:
             return callback(*args, **kwargs)
-
-    def publish(self, topic: str, data, dds_publish) -> None:
-        dds_publish(data)
-
-    def local(self, topic: str) -> list:
-        return []
-
-    def after(self, fn) -> None:
-        fn()
-
-    def close(self) -> None:
-        pass
 
 
 class RecordingPublisher:
@@ -111,18 +101,19 @@ def wire_bytes(data) -> bytes:
     return bytes(data) + b'\0' * pad if pad else bytes(data)
 
 
-def build_loop_nodes(names: list[str], lock: LoopLock) -> tuple:
+def build_loop_nodes(names: list[str], lock: LoopLock, plant_here: bool = True) -> tuple:
     """The hosted ``estimator`` and ``controller`` nodes of ``names`` (None where left out),
-    their callbacks under ``lock``; the estimator with its loop stage."""
+    their callbacks under ``lock``; the estimator with its loop stage. ``plant_here``: the
+    plant is a node of this process too (rwpend_control.controller_node)."""
     from rwpend_loop.loop import EstimatorStage
     est = ctrl = None
     if 'estimator' in names:
         from rwpend_estimation.estimator_node import EstimatorNode
-        est = EstimatorNode(bus=lock, hosted=True)
+        est = EstimatorNode(loop_lock=lock, hosted=True)
         est.stage = EstimatorStage(est.est)
     if 'controller' in names:
         from rwpend_control.controller_node import ControllerNode
-        ctrl = ControllerNode(bus=lock, hosted=True)
+        ctrl = ControllerNode(loop_lock=lock, hosted=True, plant_here=plant_here)
     return est, ctrl
 
 
@@ -139,11 +130,10 @@ def tap_publishers(taps, put) -> dict:
             pub = getattr(node, attr, None)
             if pub is None:
                 continue
-            inner = getattr(pub, 'pub', pub)          # a LocalPublisher's rclpy publisher
-            msg_type = inner.msg_type
+            msg_type = pub.msg_type
             type_name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
-            topics[inner.topic_name] = (type_name, [qos_dict(inner.qos_profile)])
-            setattr(node, attr, RecordingPublisher(inner, put))
+            topics[pub.topic_name] = (type_name, [qos_dict(pub.qos_profile)])
+            setattr(node, attr, RecordingPublisher(pub, put))
     return topics
 
 
@@ -155,7 +145,7 @@ class Host:
         from rwpend_sim.sim_node import SimNode
         from rwpend_loop.loop import ControllerStage, Loop
         self.lock = LoopLock()
-        self.sim = SimNode(bus=self.lock, hosted=True, external_command='controller' not in names)
+        self.sim = SimNode(loop_lock=self.lock, hosted=True, external_command='controller' not in names)
         self.est, self.ctrl = build_loop_nodes(names, self.lock)
         self.nodes = [n for n in (self.sim, self.est, self.ctrl) if n is not None]
         if self.ctrl is not None:
@@ -393,16 +383,21 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
         argv, ros = argv[:i], argv[i:]
     p = argparse.ArgumentParser(prog='rwpend_loop.host', description=__doc__.split('\n\n')[0])
     p.add_argument('nodes', nargs='*', default=list(NODES), help='the hosted nodes (the plant, sim or '
-                   'driver, first)')
+                   'driver, first; without a plant: estimator controller, fed by the encoders topic)')
     p.add_argument('--record', metavar='DIR', help='record every topic into the bag DIR, in this process')
     p.add_argument('--sim-time', action='store_true', help='log times on the simulated clock (lockstep)')
     a = p.parse_args(argv)
     known = PLANTS + NODES[1:]
     bad = [n for n in a.nodes if n not in known]
     plants = [n for n in a.nodes if n in PLANTS]
+    if not plants and sorted(a.nodes) == ['controller', 'estimator']:
+        if a.record or a.sim_time:
+            p.error('--record and --sim-time need the plant in this process (a recorder of its own: '
+                    './rwpend record)')
+        return a, ros
     if bad or len(set(a.nodes)) != len(a.nodes) or len(plants) != 1:
         p.error(f'nodes must be distinct names of {", ".join(known)} with one plant (sim or driver), '
-                f'got {" ".join(a.nodes)}')
+                f'or estimator controller without a plant, got {" ".join(a.nodes)}')
     if 'driver' in a.nodes and a.sim_time:
         p.error('--sim-time needs the simulator: the rig runs in real time')
     if 'controller' in a.nodes and 'estimator' not in a.nodes:
@@ -436,6 +431,9 @@ def main(argv=None) -> int:
         if 'driver' in a.nodes:
             from rwpend_loop.rig import RigHost
             host = RigHost(a.nodes, a.record)
+        elif 'sim' not in a.nodes:
+            from rwpend_loop.control import ControlHost
+            host = ControlHost(a.nodes)
         else:
             host = Host(a.nodes, a.record, a.sim_time)
         apply_thread_priority(host.nodes)       # before the loop's thread starts: it inherits it

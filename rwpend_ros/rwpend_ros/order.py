@@ -4,7 +4,7 @@ took on the same topic, nor the same message twice. Pure: no rclpy.
 Every message of the loop (EncoderCounts, StateEstimate, MotorCommand, PlantState) carries the
 ``seq`` of its sample and a header stamp. DDS (reliable, one writer) already delivers a writer's
 messages once and in order; the gate makes that a guarantee of every subscription whatever the
-path (DDS, the in-process bus, a replayed bag, two publishers on one topic by mistake) and
+path (DDS, a replayed bag, two publishers on one topic by mistake, a plant that restarted) and
 counts what it stopped, for ``/diagnostics``::
 
     gate = OrderGate()

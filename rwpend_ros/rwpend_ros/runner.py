@@ -1,40 +1,35 @@
 """A node process: the executor, the spin loop, the process's life from ``rclpy.init`` to the
-exit status (:func:`run_node` for one node, :func:`run_nodes` for a composed process)."""
+exit status (:func:`run_node`); the loop's process of several nodes is rwpend_loop.host."""
 from __future__ import annotations
 
 import os
 import signal
 import sys
 import threading
-from typing import Any, Callable, Iterable
+from typing import Any, Callable
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from rwpend_ros import intra
 from rwpend_ros.params import ConfigError
 from rwpend_ros.sched import apply_scheduling, set_process_priority
 from rwpend_ros.transport import apply_transport_or_exit
 
 def make_executor():
-    """The executor for a node process.
-
-    rclpy's EventsExecutor by default (lockstep loop measured 3x faster than with the
-    SingleThreadedExecutor; ENVIRONMENT.md: 1.5x lower ring latency), ``RWPEND_EXECUTOR=single``
-    for the SingleThreadedExecutor. Known limits of the EventsExecutor in rclpy 7.1.6, which our
-    nodes avoid: its ``spin()`` fires no timer and ignores shutdown (0 callbacks of a 10 ms timer
-    in 1 s at 100 % CPU) -- drive it with :func:`spin_executor` (``spin_once``); and a one-shot
-    timer destroyed inside its own callback made ``spin_once`` raise "Unable to convert call
-    argument '0'" -- nodes keep their timers for their whole life.
+    """The executor for a node process: rclpy's EventsExecutor (lockstep loop measured 3x faster
+    than with the SingleThreadedExecutor; ENVIRONMENT.md: 1.5x lower ring latency). Known limits
+    of the EventsExecutor in rclpy 7.1.6, which our nodes avoid: its ``spin()`` fires no timer
+    and ignores shutdown (0 callbacks of a 10 ms timer in 1 s at 100 % CPU) -- drive it with
+    :func:`spin_executor` (``spin_once``); and a one-shot timer destroyed inside its own
+    callback made ``spin_once`` raise "Unable to convert call argument '0'" -- nodes keep their
+    timers for their whole life.
     """
-    if os.environ.get('RWPEND_EXECUTOR', 'events') != 'single':
-        try:
-            from rclpy.experimental import EventsExecutor
-            return EventsExecutor()
-        except ImportError:  # pragma: no cover - older rclpy
-            pass
-    return SingleThreadedExecutor()
+    try:
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    except ImportError:  # pragma: no cover - older rclpy
+        return SingleThreadedExecutor()
 
 
 def spin_executor(executor, until: Callable[[], bool] | None = None) -> None:
@@ -102,35 +97,18 @@ def close_nodes(nodes) -> None:
 
 
 def run_node(factory: Callable[[], Any], args: list[str] | None = None) -> int:
-    """Run one node in this process until SIGINT/SIGTERM; returns the exit status
-    (:func:`run_nodes` with one factory and no bus)."""
-    return run_nodes([lambda bus: factory()], args)
+    """Run one node in this process until SIGINT/SIGTERM; returns the exit status.
 
-
-def run_nodes(factories: Iterable[Callable[[Any], Any]], args: list[str] | None = None) -> int:
-    """Run nodes in this process on one executor until SIGINT/SIGTERM; returns the exit status.
-
-    Each factory is called with the process's in-process bus (:class:`rwpend_ros.intra.LocalBus`,
-    made when there are several nodes, unless ``RWPEND_INTRA_PROCESS=0``; else None) and builds
-    its node, in the given order (after rclpy.init); the nodes are closed and destroyed in the
-    reverse order. A ConfigError while building is printed and gives status 2. A node may define
-    ``close()``, called before destruction (e.g. to zero the motor or finalise a file), and
-    ``exit_status()``, asked after it is closed: a non-zero value becomes the process's exit
-    status (the loop was dead at the end, :data:`rwpend_ros.health.EXIT_LOOP_DEAD`). A node whose
-    ``finished`` becomes True (the plant's ``duration`` reached) ends the process as a signal
-    does: the spin stops, every node is closed, then the context is shut down -- a node never
-    shuts down the context under the others (their callbacks would publish on a dead context
-    in a composed process). Priority / affinity:
-    :func:`apply_scheduling`; DDS transport: :func:`rwpend_ros.transport.apply_transport` (UDP by
-    default; exit status 2 for a bad ``RWPEND_TRANSPORT`` or ``RWPEND_INTRA_PROCESS``, before
-    anything is changed).
+    ``factory`` builds the node (after rclpy.init). A ConfigError while building is printed and
+    gives status 2. The node may define ``close()``, called before destruction (e.g. to zero the
+    motor or finalise a file), and ``exit_status()``, asked after it is closed: a non-zero value
+    becomes the process's exit status (the loop was dead at the end,
+    :data:`rwpend_ros.health.EXIT_LOOP_DEAD`). A node whose ``finished`` becomes True (the
+    plant's ``duration`` reached) ends the process as a signal does: the spin stops, the node is
+    closed, then the context is shut down. Priority / affinity: :func:`apply_scheduling`; DDS
+    transport: :func:`rwpend_ros.transport.apply_transport` (UDP by default; exit status 2 for
+    a bad ``RWPEND_TRANSPORT``, before anything is changed).
     """
-    factories = list(factories)
-    try:
-        bus = intra.LocalBus() if len(factories) > 1 and intra.enabled() else None
-    except ValueError as exc:
-        print(f'error: {exc}', file=sys.stderr, flush=True)
-        return 2
     apply_transport_or_exit()   # before rclpy.init: Fast DDS reads it when the participant is made
     apply_scheduling()   # before rclpy.init: the DDS threads inherit it
     # SIGINT/SIGTERM end the spin, not the context (rclpy's own handlers would shut it down at
@@ -142,15 +120,12 @@ def run_nodes(factories: Iterable[Callable[[Any], Any]], args: list[str] | None 
     nodes = []
     status = 0
     try:
-        for factory in factories:
-            nodes.append(factory(bus))
+        nodes.append(factory())
         apply_thread_priority(nodes)
         executor = make_executor()
         for node in nodes:
             executor.add_node(node)
         freeze_gc()
-        if bus is not None:
-            bus.thread = threading.get_ident()   # in-process delivery on the executor's thread
         spin_executor(executor, until=lambda: stop.is_set() or any(
             getattr(node, 'finished', False) is True for node in nodes))
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -159,8 +134,6 @@ def run_nodes(factories: Iterable[Callable[[Any], Any]], args: list[str] | None 
         print(f'error: {exc}', file=sys.stderr, flush=True)
         status = 2
     finally:
-        if bus is not None:
-            bus.close()
         close_nodes(nodes)
         for node in nodes:
             trace = getattr(node, 'trace', None)    # rwpend_ros.trace (RWPEND_TRACE set)

@@ -1,6 +1,6 @@
 """rwpend_ros.order.OrderGate: a subscriber never takes a message older than one it took, nor one
-twice -- over long randomized interleavings of two paths (the in-process bus and DDS), with
-delays, drops, duplicates and publisher restarts."""
+twice -- over long randomized interleavings of two paths (two publishers, or a replay beside
+DDS), with delays, drops, duplicates and publisher restarts."""
 from __future__ import annotations
 
 import heapq

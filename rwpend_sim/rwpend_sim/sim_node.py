@@ -39,7 +39,7 @@ from rwpend_ros import wire
 from rwpend_ros.claim import CommandClaim, format_id
 from rwpend_ros.diagnostics import publish_diagnostic
 from rwpend_ros.health import EXIT_LOOP_DEAD, SLOW_ADVICE, LoopHealth
-from rwpend_ros.nodes import LocalPublisher, RwNode, SlackTimer, estop_subscriptions, local_subscription
+from rwpend_ros.nodes import RwNode, SlackTimer, estop_subscriptions, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS, RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN)
@@ -111,9 +111,9 @@ PARAMS = [
 
 
 class SimNode(RwNode):
-    def __init__(self, bus=None, hosted: bool = False, external_command: bool = True) -> None:
-        """``bus``: the in-process bus of a composed process (rwpend_ros.intra), or the loop
-        lock of the loop's process (rwpend_loop.host), else None. ``hosted``: the loop's process
+    def __init__(self, loop_lock=None, hosted: bool = False, external_command: bool = True) -> None:
+        """``loop_lock``: the loop's lock when the loop's process hosts this node
+        (rwpend_loop.host), else None. ``hosted``: the loop's process
         runs the samples (no sample thread here; :meth:`publish_sample` is called after each
         sample's command is written); ``external_command``: commands also come from the
         ``command`` topic (a controller outside the loop)."""
@@ -121,7 +121,7 @@ class SimNode(RwNode):
         #: called with the new e-stop state, the loop's lock held, when it changes (the loop's
         #: process gives its controller's on_estop_state)
         self.on_estop_change = None
-        super().__init__('sim', bus=bus)
+        super().__init__('sim', loop_lock=loop_lock)
         self.param_table = ParameterTable(self)
         self.rig = declare_rig(self.param_table)   # the plant's physical truth
         model = declare_rig(self.param_table, 'model_rig.', ': the rig YAML the estimator and controller '
@@ -159,28 +159,18 @@ class SimNode(RwNode):
         self.health = LoopHealth(p['lockstep_timeout'] if self.lockstep else self.h,
                                  dead_after_s=p['loop_dead_after'])
         #: the loop's lock: the host's (one for every node of the loop) or this node's own
-        self.lock = bus.lock if self.hosted else threading.Condition()
+        self.lock = loop_lock.lock if self.hosted else threading.Condition()
         self.stop = threading.Event()
         self.hw = SimHardware(self.core)
         self.finished = False
 
-        # to an estimator in this process first (real time: from the sample loop's thread,
-        # rwpend_ros.intra), then DDS. In lockstep an estimator of this process takes it by DDS:
-        # the sample goes out from on_command, inside the chain of callbacks the previous sample
-        # started, and through the bus every sample would be deferred from the one before (the
-        # run in one callback)
-        self.pub_enc = LocalPublisher(self, EncoderCounts, 'encoders', QOS_CONTROL_PUB,
-                                      intra=not self.lockstep)
+        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
         self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL_PUB)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
         self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
-        # also taken directly from a controller in this process (composed mode, rwpend_ros.intra),
-        # after the command is written to DDS: an estimator of this process then has command k
-        # (through DDS) before the sample k+1 this callback publishes in lockstep
         self.sub_cmd = (local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL,
-                                           before_dds=False, sender=wire.command_sender,
-                                           intra=not self.hosted)
+                                           sender=wire.command_sender)
                         if external_command or not self.hosted else None)
         #: one controller at a time (rwpend_ros.claim)
         try:
@@ -412,45 +402,25 @@ class SimNode(RwNode):
     def loop_realtime(self) -> None:
         """Sample k goes out at t0 + k h (absolute deadlines on the monotonic clock). The plant is
         integrated over [t_k, t_k+1) when command k arrives (:meth:`on_command`), or at t_k+1 with
-        the command held then if it did not: so at each instant only the publishing is left.
-
-        With an estimator in this process (``--composed``), this thread hands it the sample
-        through the in-process bus (rwpend_ros.intra), holding the callback lock as a callback
-        of this node: the estimator, the controller it hands the state to, and this node's
-        ``on_command`` (deferred until the sample is out) all run here, with no hand-over to the
-        executor's thread (PERFORMANCE.md, "What each mechanism buys")."""
+        the command held then if it did not: so at each instant only the publishing is left."""
         self.wait_for_loop(need_command=False)
         period_ns = self.period_ns
         t0_ros = self.get_clock().now().nanoseconds
         t0 = time.monotonic_ns()
         k = 0
         early = int(self.p['wake_early_us']) * 1000
-        me = threading.get_ident()
-        bus = self.bus
-        if bus is not None:
-            bus.extra_threads.add(me)
-        try:
-            while not self.stop.is_set():
-                stamp = t0_ros + k * period_ns
-                tick = t0 + k * period_ns
-                if self.pub_enc.local_subscribers():   # an estimator of this process: as its callback
-                    more = bus.call(self, self._tick, stamp, tick)
-                else:
-                    more = self._tick(stamp, tick)
-                if not more:
-                    break
-                k += 1
-                deadline = t0 + k * period_ns
-                delay = deadline - time.monotonic_ns()
-                if delay > early:
-                    time.sleep((delay - early) / 1e9)
-                elif delay < -period_ns:
-                    self.overruns += 1
-                while early and time.monotonic_ns() < deadline:
-                    time.sleep(0)                      # yields the GIL (the executor thread runs)
-        finally:
-            if bus is not None:
-                bus.extra_threads.discard(me)
+        while not self.stop.is_set():
+            if not self._tick(t0_ros + k * period_ns, t0 + k * period_ns):
+                break
+            k += 1
+            deadline = t0 + k * period_ns
+            delay = deadline - time.monotonic_ns()
+            if delay > early:
+                time.sleep((delay - early) / 1e9)
+            elif delay < -period_ns:
+                self.overruns += 1
+            while early and time.monotonic_ns() < deadline:
+                time.sleep(0)                      # yields the GIL (the executor thread runs)
         self.finish()
 
     def _tick(self, stamp_ns: int, tick_ns: int) -> bool:
