@@ -23,7 +23,8 @@ import struct
 
 from rwpend_sim.sim_core import Reading
 
-#: seconds between two /diagnostics of each node (on the steady clock: samples may stop)
+#: seconds between two /diagnostics of the controller (the estimator: its diagnostics_period);
+#: on the steady clock: the samples may stop
 DIAGNOSTICS_PERIOD = 1.0
 
 
@@ -82,7 +83,9 @@ class ControlHost:
             self.est, EncoderCounts, 'encoders',
             lambda data: lock.call(self.est, self.on_encoders, data), QOS_CONTROL)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.est.create_timer(DIAGNOSTICS_PERIOD, self._diagnostics, clock=steady)
+        self.est.create_timer(float(self.est.get_parameter('diagnostics_period').value),
+                              self.est.publish_diagnostics, clock=steady)
+        self.ctrl.create_timer(DIAGNOSTICS_PERIOD, self.ctrl.publish_diagnostics, clock=steady)
         self.finished = False
 
     def on_encoders(self, data: bytes) -> None:
@@ -112,10 +115,6 @@ class ControlHost:
                 est.align.command(seq, u)
                 est.note_command(seq, u)
         est.publish_estimate(header, seq, tick.estimate)
-
-    def _diagnostics(self) -> None:
-        self.est.publish_diagnostics()
-        self.ctrl.publish_diagnostics()
 
     def start(self) -> None:
         pass
