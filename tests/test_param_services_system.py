@@ -242,7 +242,7 @@ def test_describe_shows_type_description_and_range(rig, node):
                       'T': (T.PARAMETER_DOUBLE, (0.0, 10.0), ''),
                       'estimator': (T.PARAMETER_STRING, None, 'one of: difference, filtered')},
         'sim': {'lockstep_timeout': (T.PARAMETER_DOUBLE, None, '> 0'),
-                'wake_early_us': (T.PARAMETER_INTEGER, (0, 1_000_000), ''),
+                'lockstep_recorder_window': (T.PARAMETER_INTEGER, (0, 80), '0 or '),
                 'taps.times': (T.PARAMETER_DOUBLE_ARRAY, None, '')},
         'driver': {'pendulum_sign': (T.PARAMETER_INTEGER, (-1, 1), ''),
                    'baud': (T.PARAMETER_INTEGER, (1200, 12_000_000), ''),

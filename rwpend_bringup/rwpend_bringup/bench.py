@@ -791,8 +791,8 @@ def summary_text(res: dict) -> str:
     m = res['machine']
     st = res['settings']
     lines = ['rwpend bench -- ' + time.strftime('%Y-%m-%d %H:%M', time.localtime(res['started'])),
-             f"machine: {m['cpus']} CPU ({m['cpu_model']}), Python {m['python']}, {m['rmw']}, executor "
-             f"{m['executor']}, transport {m.get('transport', 'udp')}; "
+             f"machine: {m['cpus']} CPU ({m['cpu_model']}), Python {m['python']}, {m['rmw']}, "
+             f"transport {m.get('transport', 'udp')}; "
              f"load average {m.get('loadavg_start')} -> {m.get('loadavg_end')}",
              f"settings: rt priority {st.get('rt_priority')}, CPU wake-up latency request "
              f"{'none' if st.get('cpu_latency_us') is None else str(st['cpu_latency_us']) + ' us'}, "
@@ -927,9 +927,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--rt-priority', type=int, default=50, metavar='N',
                    help='./rwpend up --rt-priority of the runs (default 50; 0 = ordinary scheduling)')
     p.add_argument('--set', action='append', default=[], metavar='NODE.PARAM=VALUE',
-                   help='./rwpend up --set of the runs (repeatable), e.g. sim.wake_early_us=100')
-    p.add_argument('--cpus', default=None, metavar='LOOP[:RECORDER]',
-                   help='./rwpend up --cpus of the runs (CPU affinity), e.g. 1:0')
+                   help='./rwpend up --set of the runs (repeatable), e.g. controller.status_every=1')
     p.add_argument('--pin', action='append', default=None, metavar='PROCESS=CPUS|none',
                    help='./rwpend up --pin of the real-time runs (repeatable; each run takes those '
                    'of its processes). Default: separate processes --pin sim=0 --pin estimator=0 '
@@ -973,13 +971,11 @@ def main(argv=None) -> int:
         print('rwpend bench: error: --rt-priority must be in 0..99', file=sys.stderr)
         return 2
     up_extra = ['--rt-priority', str(a.rt_priority), *(x for v in a.set for x in ('--set', v))]
-    if a.cpus:
-        up_extra += ['--cpus', a.cpus]
     cpu_latency = None if str(a.cpu_latency).lower() == 'none' else a.cpu_latency
     if cpu_latency is not None:
         up_extra += ['--cpu-latency', str(cpu_latency)]
     try:
-        _stack(up_extra)      # refuse bad --set / --cpus before any run
+        _stack(up_extra)      # refuse bad --set before any run
         pins = realtime_pins(a.pin, layouts)
     except (ValueError, SystemExit) as exc:
         if not isinstance(exc, SystemExit):
@@ -989,7 +985,7 @@ def main(argv=None) -> int:
            'settings': {'duration_s': duration, 'lockstep_duration_s': ls_dur, 'periods_s': list(periods),
                         'layouts': list(layouts), 'domain_id': int(env['ROS_DOMAIN_ID']),
                         'namespace': a.ns, 'quick': a.quick, 'rt_priority': a.rt_priority,
-                        'set': list(a.set), 'cpus': a.cpus, 'pin_realtime': {k: list(v) for k, v in pins.items()},
+                        'set': list(a.set), 'pin_realtime': {k: list(v) for k, v in pins.items()},
                         'cpu_latency_us': None if cpu_latency is None else int(cpu_latency),
                         'command': 'rwpend bench ' + ' '.join(sys.argv[1:] if argv is None else argv)},
            'realtime': [], 'lockstep': [], 'decode': None, 'scale': None, 'sweep': None}

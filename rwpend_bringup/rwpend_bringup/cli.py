@@ -204,13 +204,8 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    'idle CPUs in states that wake within US microseconds; 0 = idle CPUs poll, the '
                    'fastest wake-up, at the cost of spinning CPUs. Needs root (else a warning, no '
                    'request); default: no request; see PERFORMANCE.md')
-    p.add_argument('--cpus', default=None, metavar='LOOP[:RECORDER]',
-                   help='CPU affinity: the loop processes (plant, estimator, controller) on the CPUs '
-                   'LOOP (e.g. 1 or 0,1), the recorder on RECORDER if given (e.g. --cpus 1:0); '
-                   'see PERFORMANCE.md')
     p.add_argument('--pin', action='append', default=[], metavar='PROCESS=CPUS',
-                   help='CPU affinity of one process of the stack (repeatable; overrides --cpus for '
-                   'it): loop, sim, driver, estimator, controller, control (--composed control) or '
+                   help='CPU affinity of one process of the stack (repeatable): loop, sim, driver, estimator, controller, control (--composed control) or '
                    'recorder, on the CPUs CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
                    '--pin sim=0 --pin estimator=0 --pin controller=1 took 12-57 us off the median '
                    'loop latency of separate processes (PERFORMANCE.md, "What each mechanism buys")')
@@ -434,23 +429,6 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
     lat = getattr(a, 'cpu_latency', None)
     if lat is not None and lat < 0:
         raise ValueError(f'--cpu-latency must be >= 0 (µs), got {lat}')
-    cpus = getattr(a, 'cpus', None)
-    if cpus:
-        loop, _, rec = cpus.partition(':')
-        n = os.cpu_count() or 1
-        for part in (loop, rec):
-            ids = [c.strip() for c in part.split(',')] if part else []
-            if part and not all(c.isdigit() and int(c) < n for c in ids):
-                raise ValueError(f'--cpus: CPU numbers 0..{n - 1} separated by commas, LOOP[:RECORDER], '
-                                 f'got {cpus!r}')
-        if not loop:
-            raise ValueError(f'--cpus: LOOP CPUs missing in {cpus!r}')
-        for s in specs:
-            if s.name == 'recorder':
-                if rec:
-                    s.env['RWPEND_CPUS'] = rec
-            else:
-                s.env['RWPEND_CPUS'] = loop
     for name, ids in parse_pins(getattr(a, 'pin', None) or [], [s.name for s in specs]).items():
         for s in specs:
             if s.name == name:

@@ -12,7 +12,7 @@ def specs_of(*argv):
 
 
 def test_the_console_is_a_process_of_the_stack_not_of_the_loop():
-    s = specs_of('--console', '--rt-priority', '50', '--cpus', '0')
+    s = specs_of('--console', '--rt-priority', '50', '--pin', 'sim=0')
     c = s['console']
     assert c.module == 'rwpend_console.console' and not c.ros_args
     assert c.args == ['--ns', '/rwpend', '--listen', '127.0.0.1', '--port', '8080']

@@ -72,9 +72,6 @@ PARAMS = [
        'before sample 0', low=0),
     RO('start.first_command_timeout', 10.0, 'lockstep: wall seconds sample 0 waits for its command '
        '(start-up under load; later samples wait lockstep_timeout)', low=0.0, low_open=True),
-    RO('wake_early_us', 0, 'real time: wake this many us before each sample instant and wait the rest '
-       'actively (yielding the CPU): a sample goes out closer to its instant, at the cost of CPU '
-       '(0 = sleep until the instant)', low=0, high=1_000_000),
     RO('command_timeout_samples', 3, 'samples without a fresh command before u = 0', low=1),
     RO('claim_timeout_samples', 500, 'samples without any command of the controller that claimed the '
        'rig before another controller may claim it (rwpend_ros.claim)', low=1),
@@ -408,19 +405,15 @@ class SimNode(RwNode):
         t0_ros = self.get_clock().now().nanoseconds
         t0 = time.monotonic_ns()
         k = 0
-        early = int(self.p['wake_early_us']) * 1000
         while not self.stop.is_set():
             if not self._tick(t0_ros + k * period_ns, t0 + k * period_ns):
                 break
             k += 1
-            deadline = t0 + k * period_ns
-            delay = deadline - time.monotonic_ns()
-            if delay > early:
-                time.sleep((delay - early) / 1e9)
+            delay = t0 + k * period_ns - time.monotonic_ns()
+            if delay > 0:
+                time.sleep(delay / 1e9)
             elif delay < -period_ns:
                 self.overruns += 1
-            while early and time.monotonic_ns() < deadline:
-                time.sleep(0)                      # yields the GIL (the executor thread runs)
         self.finish()
 
     def _tick(self, stamp_ns: int, tick_ns: int) -> bool:
