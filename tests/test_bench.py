@@ -24,7 +24,7 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
     res = json.loads((out / 'bench.json').read_text())
     for key in ('started', 'finished', 'machine', 'settings', 'realtime', 'lockstep', 'decode'):
         assert key in res, key
-    for key in ('cpus', 'cpu_model', 'python', 'rmw', 'executor', 'transport', 'loadavg_start', 'loadavg_end'):
+    for key in ('cpus', 'cpu_model', 'python', 'rmw', 'transport', 'loadavg_start', 'loadavg_end'):
         assert key in res['machine'], key
     assert res['machine']['transport'] == 'udp'
     assert res['settings']['periods_s'] == [0.001] and res['settings']['layouts'] == ['separate']
