@@ -209,3 +209,33 @@ def test_the_rig_loop_steps_on_each_sample_the_device_sends(rig):
     s = drv.core.plant.state
     assert abs(math.remainder(s.theta - math.pi, 2 * math.pi)) < 0.05, 'swung up and balanced'
     assert loop.gate.interval(False) == 0.0 and loop.gate.take_event() is None
+
+
+def test_the_loop_fed_by_the_encoders_topic_gives_the_commands_of_the_plants_own_loop(rig):
+    """rwpend_loop.control: the estimator and the controller as a loop whose hardware is the
+    ``encoders`` topic (the plant elsewhere takes the commands through its own gate) answer
+    every sample with the command the loop with the plant's own hardware gives -- the u of
+    each sample taken from the commands this side sent (CommandAlignment)."""
+    from rwpend_estimation.alignment import CommandAlignment
+    from rwpend_loop.control import TopicGate, TopicReading
+    ref = []
+    run_lockstep(make_loop(rig), 3000, lambda t: ref.append((t.reading.seq, t.u)))
+    # the plant: its own loop without estimator and controller, taking commands as from the topic
+    plant = make_loop(rig, controller=False)
+    plant.estimator = None
+    align = CommandAlignment(rig.u_max)
+    reading = TopicReading(align)
+    est = EstimatorStage(make_estimator(None, rig, EstimatorConfig.from_values({}, rig=rig)))
+    ctrl = ControllerStage(Controller(rig, ControllerConfig.designed(rig), mode='auto'), ID)
+    side = Loop(reading, TopicGate(), est, ctrl, rig.sample_period)
+    got = []
+    for _ in range(3000):
+        sample = plant.step().reading                      # encoders k out
+        reading.set(sample.seq, sample.pendulum_counts, sample.motor_counts)
+        tick = side.step()                                 # the other process: estimate, control
+        if tick.u is not None:
+            align.command(sample.seq, tick.u)              # ... and the command back on the topic
+            plant.gate.offer(ID, sample.seq, tick.u)
+        got.append((sample.seq, tick.u))
+    assert got == ref
+    assert reading.read().u_prev == align.command_for(2999)
