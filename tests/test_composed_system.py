@@ -74,13 +74,14 @@ def test_control_layout_lockstep_swings_up(tmp_path, ros_env):
 
 @pytest.mark.timeout(90)
 def test_every_layout_gives_the_same_bag_in_lockstep(tmp_path, ros_env):
-    """Bit for bit: the loop in one process (the default), estimator + controller in one loop
-    process with the plant separate, and every node a process of its own."""
+    """Bit for bit, a tap included: the loop in one process (the default), estimator +
+    controller in one loop process with the plant separate, and every node a process of its
+    own."""
     bags = {}
     layouts = {'loop': [], 'control': ['--composed', 'control'], 'separate': ['--composed', 'none']}
     for layout, extra in layouts.items():
         bags[layout] = tmp_path / layout
-        args = ['--lockstep', '--mode', 'auto', '--duration', '2', '--record', str(bags[layout])]
+        args = ['--lockstep', '--mode', 'auto', '--duration', '2', '--tap', '1.5:0.5', '--record', str(bags[layout])]
         up(args + extra, ros_env, timeout=28)
     for other in ('loop', 'control'):
         _same_run(read_bag(bags[other]), read_bag(bags['separate']))

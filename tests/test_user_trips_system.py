@@ -136,16 +136,3 @@ def test_reset_is_refused_while_balancing(tmp_path, ros_env):
     status = strings(bag, '/rwpend/controller/status', ['mode'])
     assert all(mode == 'balance' for _, mode in status[1:]), status[:5]
 
-
-@pytest.mark.system
-@pytest.mark.timeout(300)
-def test_the_loop_layout_gives_the_bag_of_separate_processes(tmp_path, ros_env):
-    """The loop in one thread (the default layout, the recorder in its process) and the nodes as
-    separate processes give the same lockstep bag: every loop message, byte for byte."""
-    from rwpend_bag import sameness
-    bags = {}
-    for layout in ('loop', 'none'):
-        bags[layout] = tmp_path / layout
-        rwpend(['up', '--lockstep', '--duration', '3', '--mode', 'auto', '--tap', '2:0.5', '--composed', layout,
-                '--record', str(bags[layout])], ros_env, timeout=240)
-    assert sameness.compare(bags['loop'], bags['none']) == []
