@@ -205,8 +205,9 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    'fastest wake-up, at the cost of spinning CPUs. Needs root (else a warning, no '
                    'request); default: no request; see PERFORMANCE.md')
     p.add_argument('--pin', action='append', default=[], metavar='PROCESS=CPUS',
-                   help='CPU affinity of one process of the stack (repeatable): loop, sim, driver, estimator, controller, control (--composed control) or '
-                   'recorder, on the CPUs CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
+                   help='CPU affinity of one process of the stack (repeatable): loop, sim, driver, '
+                   'estimator, controller, control (--composed control) or recorder, on the CPUs '
+                   'CPUS (e.g. 0 or 0,1). On a 2-CPU machine '
                    '--pin sim=0 --pin estimator=0 --pin controller=1 took 12-57 us off the median '
                    'loop latency of separate processes (PERFORMANCE.md, "What each mechanism buys")')
     p.add_argument('--console', nargs='?', const='8080', default=None, metavar='[LISTEN:]PORT',
@@ -223,8 +224,8 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
     p.add_argument('--only', default=None, metavar='PROCESS[,PROCESS...]',
                    help='run only these processes of the stack, on this host (the others run on other '
                    'hosts of the network with the same up arguments): sim or driver, control '
-                   '(estimator and controller), recorder (estimator and controller with --composed '
-                   'none); e.g. the rig PC --only sim, a laptop --only control, a console --only '
+                   '(estimator and controller; estimator, controller with --composed none), '
+                   'recorder; e.g. the rig PC --only sim, a laptop --only control, a console --only '
                    'recorder. See docs/network.md.')
 
 
