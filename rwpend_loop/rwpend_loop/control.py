@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import struct
 
+from rwpend_ros import wire
 from rwpend_sim.sim_core import Reading
 
 #: seconds between two /diagnostics of the controller (the estimator: its diagnostics_period);
@@ -93,7 +94,6 @@ class ControlHost:
         est, ctrl = self.est, self.ctrl
         for clock in self.sample_clocks:
             clock(data)
-        from rwpend_ros import wire
         try:
             header, seq, pc, mc = wire.unpack_encoders(data)
         except (struct.error, IndexError) as exc:   # truncated bytes: counted, nothing else changes
