@@ -82,7 +82,7 @@ class ControlHost:
         lock = self.lock
         self.est.sub_enc = local_subscription(
             self.est, EncoderCounts, 'encoders',
-            lambda data: lock.call(self.est, self.on_encoders, data), QOS_CONTROL)
+            lambda data: lock.call(self.on_encoders, data), QOS_CONTROL)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.est.create_timer(float(self.est.get_parameter('diagnostics_period').value),
                               self.est.publish_diagnostics, clock=steady)

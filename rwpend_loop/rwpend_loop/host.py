@@ -58,7 +58,7 @@ class LoopLock:
     def __init__(self) -> None:
         self.lock = threading.Condition(threading.RLock())
 
-    def call(self, owner, callback, *args, **kwargs):
+    def call(self, callback, *args, **kwargs):
         with self.lock:
             return callback(*args, **kwargs)
 

@@ -40,7 +40,7 @@ def test_recording_publisher_records_every_message_and_publishes_while_subscribe
 def test_loop_lock_runs_callbacks_holding_it():
     lock = LoopLock()
     seen = []
-    assert lock.call(None, lambda x: seen.append(lock.lock._is_owned()) or x, 5) == 5
+    assert lock.call(lambda x: seen.append(lock.lock._is_owned()) or x, 5) == 5
     assert seen == [True]
 
 

@@ -1,7 +1,8 @@
 """The rclpy side of a loop node: callbacks that run holding the loop's lock in the loop's process
 (:class:`LockedCallbacks`, :class:`RwNode`), the loop's subscriptions of wire bytes
-(:func:`local_subscription`, with the order gate of :mod:`rwpend_ros.order`), and housekeeping in the loop's slack of a
-node in a process of its own (:class:`SlackTimer`). Algorithms live in the pure packages; this module only deals with rclpy.
+(:func:`local_subscription`, with the order gate of :mod:`rwpend_ros.order`), and housekeeping
+in the loop's slack of a node in a process of its own (:class:`SlackTimer`). Algorithms live in
+the pure packages; this module only deals with rclpy.
 """
 from __future__ import annotations
 
@@ -31,7 +32,7 @@ class LockedCallbacks:
             return callback
 
         def run(*args, **kwargs):
-            return lock.call(self, callback, *args, **kwargs)
+            return lock.call(callback, *args, **kwargs)
         run.__wrapped__ = callback      # rclpy reads the callback's signature through it
         return run
 
