@@ -122,8 +122,10 @@ def _resolve(ref: str, here: Path) -> Path | None:
 
 def _is_repo_path(ref: str, here: Path) -> bool:
     first = ref.split('/')[0]
-    if first in ('.', '..'):                      # a path that leaves the repository is not one of its files
-        return (here / ref).resolve().is_relative_to(ROOT)
+    if first in ('.', '..'):          # a relative path is one of ours only if it lands in a tracked folder
+        target = (here / ref).resolve()
+        return target.is_relative_to(ROOT) and target != ROOT \
+            and target.relative_to(ROOT).parts[0] in _tracked_top()
     if any(part in GENERATED or part.endswith('_out') for part in ref.split('/')):
         return False
     return first in _tracked_top() or (here != ROOT and (here / first).exists()
