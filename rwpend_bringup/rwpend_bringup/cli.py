@@ -41,11 +41,13 @@ from .launch import DEFAULT_NS, Launcher, NodeSpec
 ROOT = Path(os.environ.get('RWPEND_ROOT', Path(__file__).resolve().parents[2]))
 MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto', 'law')
 NODE_MODULES = {
-    'sim': 'rwpend_sim.sim_node',
+    'sim': 'rwpend_loop.host',     # the loop's process with the simulator alone (NODE_ARGS)
     'estimator': 'rwpend_estimation.estimator_node',
     'controller': 'rwpend_control.controller_node',
     'driver': 'rwpend_driver.driver_node',
 }
+#: the arguments of a node's process before --ros-args
+NODE_ARGS = {'sim': ['sim']}
 #: ``--composed`` values: which nodes share the loop's process (rwpend_loop.host); ``loop``: the
 #: plant, estimator, controller and recorder; ``control``: the estimator and the controller,
 #: fed by the plant's ``encoders`` topic (rwpend_loop.control), the plant in a process of its own
@@ -356,7 +358,7 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         # the others read goes along for the simulator's report of the difference
         model_params = {'model_' + k: v for k, v in model.as_params().items()}
         plant_spec = NodeSpec('sim', NODE_MODULES['sim'], {**truth, **rig, **params['sim'], **model_params},
-                              stop_rank=3)
+                              args=list(NODE_ARGS['sim']), stop_rank=3)
     elif plant.startswith('serial:') and len(plant) > 7:
         if a.lockstep or a.tap or a.theta0 is not None or truth:
             raise ValueError('--lockstep, --tap, --theta0 and --plant-rig need the simulator (--plant sim); '
@@ -401,7 +403,7 @@ def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
         rec_args = ['record', '-o', str(out), '--all']
         if plant == 'sim' and a.lockstep:
             # the simulator keeps within 50 samples of the recorder: a recorder that falls
-            # behind slows the run down rather than losing messages (rwpend_sim.sim_node)
+            # behind slows the run down rather than losing messages (rwpend_loop.host)
             plant_spec.params.setdefault('lockstep_recorder_window', LOCKSTEP_RECORDER_WINDOW)
             rec_args += ['--progress', a.ns.rstrip('/') + '/recorder/progress']
         if a.lockstep:
@@ -717,7 +719,7 @@ def node_main(argv, name: str | None = None) -> int:
         return fail(prog, str(exc))
     if ns is None and not any(x.startswith('__ns:=') for x in rest_ros):
         ns = DEFAULT_NS
-    cmd = [sys.executable, '-u', '-m', NODE_MODULES[name], '--ros-args']
+    cmd = [sys.executable, '-u', '-m', NODE_MODULES[name], *NODE_ARGS.get(name, ()), '--ros-args']
     if ns is not None:
         cmd += ['-r', f'__ns:={ns}']
     cmd += ['--params-file', str(rig_file()), '--params-file', str(stack_file())]

@@ -15,10 +15,12 @@ it as fast as the CPU goes, and the bag is the same every run.
 
 A node left out of the list runs elsewhere (another process or host): the loop then stops at
 the estimate (no controller here: ``state`` goes out, the command comes back on ``command``
-through the same gate, claimed) or at the encoders (no estimator either). In lockstep the loop
-waits for that command (the simulator's ``lockstep_timeout``, then u = 0, counted). The
-estimator and the controller without a plant (``estimator controller``) are the loop's process
-of the other side: :mod:`rwpend_loop.control`, one loop step per ``encoders`` message.
+through the same gate, claimed) or at the encoders (no estimator either: ``host sim`` is the
+simulator alone, ``./rwpend node sim``). In lockstep the loop waits for that command (the
+simulator's ``lockstep_timeout``, then u = 0, counted), and for a recorder outside that reports
+its progress (the simulator's ``lockstep_recorder_window``). The estimator and the controller
+without a plant (``estimator controller``) are the loop's process of the other side:
+:mod:`rwpend_loop.control`, one loop step per ``encoders`` message.
 
 ``--record DIR``: the recorder of every topic runs in this process, as rosbag2's composable
 recorder does: what the hosted nodes publish on the sample path goes into the bag as the bytes
@@ -145,7 +147,7 @@ class Host:
         from rwpend_sim.sim_node import SimNode
         from rwpend_loop.loop import ControllerStage, Loop
         self.lock = LoopLock()
-        self.sim = SimNode(loop_lock=self.lock, hosted=True, external_command='controller' not in names)
+        self.sim = SimNode(self.lock, external_command='controller' not in names)
         self.est, self.ctrl = build_loop_nodes(names, self.lock)
         self.nodes = [n for n in (self.sim, self.est, self.ctrl) if n is not None]
         if self.ctrl is not None:
@@ -213,7 +215,10 @@ class Host:
         """Hold sample 0 until the parts outside this process are there: the subscribers the
         simulator's ``start.*_subscribers`` ask for (a recorder of its own), an external
         estimator (a subscriber of encoders), in lockstep an external controller (a publisher of
-        command and a subscriber of state); then the simulator's ``start.delay``."""
+        command and a subscriber of state); then the simulator's ``start.delay`` for discovery to
+        settle -- except in lockstep with nothing outside awaited (the whole sample path and the
+        recorder here: the delay would change nothing but the wall time). A recorder outside
+        that the lockstep run keeps pace with takes ``/clock`` (its progress)."""
         sim = self.sim
         enc_topic = sim.resolve_topic_name('encoders')
         # start.encoders_subscribers counts the estimator (here, when hosted) and a recorder
@@ -222,20 +227,34 @@ class Host:
         # lockstep: start.state_subscribers counts the controller (here, when hosted) and the
         # subscribers of state outside (a console whose page must be open before sample 0)
         n_state = max(0, sim.p['start.state_subscribers'] - (self.ctrl is not None)) if sim.lockstep else 0
+        said = time.monotonic()
         while not self.stop.is_set():
-            ok = (sim.count_subscribers(enc_topic) >= n_enc
-                  and sim.count_subscribers(sim.resolve_topic_name('sim/true_state')) >= n_true
-                  and sim.count_subscribers(sim.resolve_topic_name('state')) >= n_state)
-            if self.est is None:
-                ok = ok and sim.count_subscribers(enc_topic) >= 1
+            missing = []
+            if sim.count_subscribers(enc_topic) < n_enc:
+                missing.append(f'{n_enc} subscribers of encoders')
+            if sim.count_subscribers(sim.resolve_topic_name('sim/true_state')) < n_true:
+                missing.append(f'{n_true} subscribers of sim/true_state')
+            if sim.count_subscribers(sim.resolve_topic_name('state')) < n_state:
+                missing.append(f'{n_state} subscribers of state')
             if self.ctrl is None and sim.lockstep:   # (real time: the plant runs without one)
-                ok = ok and sim.count_publishers(sim.resolve_topic_name('command')) > 0
-                if self.est is not None:
-                    ok = ok and sim.count_subscribers(sim.resolve_topic_name('state')) >= 1
-            if ok:
+                if sim.count_publishers(sim.resolve_topic_name('command')) == 0:
+                    missing.append('a publisher of command')
+                if self.est is not None and sim.count_subscribers(sim.resolve_topic_name('state')) == 0:
+                    missing.append('a subscriber of state')
+            if sim.recorder_window and sim.pub_clock.get_subscription_count() == 0:
+                missing.append('the recorder (a subscriber of /clock)')
+            if not missing:
                 break
+            if time.monotonic() - said >= sim.p['diagnostics_period']:
+                said = time.monotonic()
+                with self.lock.lock:           # no failure is silent: what sample 0 waits for
+                    sim.waiting_for = ', '.join(missing)
+                    sim.publish_diagnostics()
             time.sleep(0.02)
-        time.sleep(sim.p['start.delay'])
+        sim.waiting_for = ''
+        outside = n_enc or n_true or n_state or self.est is None or self.ctrl is None or sim.recorder_window
+        if outside or not sim.lockstep:
+            time.sleep(sim.p['start.delay'])
         sim.wall_start = time.monotonic()
 
     def _run(self) -> None:
@@ -317,7 +336,11 @@ class Host:
         t0_ros = self.sim.get_clock().now().nanoseconds
         period = self.period_ns
 
+        trace = self.sim.trace
+
         def tick(k: int) -> bool:
+            if trace is not None:
+                trace('sim.tick', k, pacer.deadline(k))
             with self.lock.lock:
                 return self._sample(k, t0_ros + k * period, behind=pacer.behind)
         pacer.run(tick, self.stop)
@@ -326,12 +349,16 @@ class Host:
     def _run_lockstep(self) -> None:
         sim = self.sim
         period = self.period_ns
-        external = self.ctrl is None and self.est is not None
+        external = self.ctrl is None
         writer = self.recorder.writer if self.recorder is not None else None
         k = 0
         cond = self.lock.lock
         while not self.stop.is_set():
             with cond:
+                if sim.recorder_behind(k):
+                    self._hold_for_recorder(k)
+                if sim.trace is not None:
+                    sim.trace('sim.tick', k)
                 if not self._sample(k, k * period):
                     break
                 if external:
@@ -340,6 +367,29 @@ class Host:
                 while writer.queue_size() > RECORD_QUEUE_LIMIT // 2 and not self.stop.is_set():
                     time.sleep(0.001)        # the bag writer catches up: nothing is lost
             k += 1
+
+    def _hold_for_recorder(self, k: int) -> None:
+        """Lockstep, lock held: sample k waits until the recorder outside has reported sample
+        k - W (the simulator's ``lockstep_recorder_window`` W); after
+        ``lockstep_recorder_timeout`` wall seconds without a report the run goes on without it
+        (said at once, on /diagnostics too: the bag may then miss messages)."""
+        sim = self.sim
+        sim.recorder_holds += 1
+        hold = time.monotonic()
+        limit = sim.p['lockstep_recorder_timeout']
+        while sim.recorder_behind(k) and not self.stop.is_set():
+            remaining = max(sim.recorder_wall, hold) + limit - time.monotonic()
+            if remaining <= 0:
+                sim.get_logger().error(
+                    f'lockstep: the recorder reported no progress for {limit:g} s while '
+                    f'{k - sim.recorder_k} samples behind; running on without waiting for it '
+                    '(the bag may miss messages)')
+                sim.recorder_window = 0
+                sim.recorder_given_up = True
+                sim.publish_diagnostics()
+                break
+            self.lock.lock.wait(remaining)
+        sim.recorder_hold_s += time.monotonic() - hold
 
     def _await_command(self, k: int) -> None:
         """Lockstep, lock held: wait for the external controller's command answering k

@@ -143,8 +143,9 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
     loop message) drops duplicates and messages older than the last one taken, and counts them;
     with ``sender`` (the sender's id from the bytes: :func:`rwpend_ros.wire.command_sender`) one
     gate per sender (:class:`rwpend_ros.order.SourceGates`), so that the streams of two senders
-    on one topic both reach ``callback``, each once and in order. The callback is the given one
-    (not :class:`LockedCallbacks`'): a node of the loop's process takes the lock in it."""
+    on one topic both reach ``callback``, each once and in order. In the loop's process the gate
+    and the callback run holding the loop's lock (:class:`LockedCallbacks`): the loop reads the
+    gate's counters for /diagnostics from its own thread."""
     gate = (SourceGates() if sender is not None else OrderGate()) if ordered else None
     holder: list[LoopSubscription] = []
 
@@ -158,6 +159,9 @@ def local_subscription(node, msg_type, topic: str, callback: Callable[[bytes], N
             return
         if admitted:
             callback(data)
-    sub = Node.create_subscription(node, msg_type, topic, gated if ordered else callback, qos, raw=True)
+    take = gated if ordered else callback
+    if isinstance(node, LockedCallbacks):
+        take = node._locked(take)
+    sub = Node.create_subscription(node, msg_type, topic, take, qos, raw=True)
     holder.append(LoopSubscription(sub, gate))
     return holder[0]

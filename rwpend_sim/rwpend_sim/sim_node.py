@@ -6,16 +6,20 @@ with zero-order hold, publishes ``sim/true_state`` (PlantState), serves ``sim/di
 std_msgs/Bool, and ``~/estop`` service, std_srvs/SetBool), reports on ``/diagnostics``
 (stamped with the sim time in lockstep, like the estimator's and the controller's).
 
-Two time modes (parameter ``lockstep``):
-* real time: samples on the wall clock, like the rig (a thread with absolute deadlines);
-* lockstep: publishes ``/clock``; for sample k it waits for the command answering seq k
-  (``lockstep_timeout`` s of wall time, then u = 0 for that sample, counted) before
-  integrating; runs as fast as the loop allows; identical inputs give identical outputs.
-  With ``lockstep_recorder_window`` W > 0 it also keeps within W samples of the recorder: sample
-  k goes out once the recorder has reported (``recorder/progress``, rosgraph_msgs/Clock, every
-  :data:`rwpend_ros.qos.RECORDER_PROGRESS_EVERY` samples) the ``/clock`` of sample k - W, so a
-  recorder that runs behind (starved of CPU, a slow disk) slows the run down instead of losing
-  messages (the publishers keep 100 samples for a reader that lags: QOS_CONTROL_PUB).
+The node has no thread of its own: the loop's process runs its samples (``python -m
+rwpend_loop.host sim [estimator controller]``; ``./rwpend node sim`` starts it alone, the
+estimator and the controller then elsewhere, through ``encoders`` and ``command``). Two time
+modes (parameter ``lockstep``):
+* real time: samples on the wall clock, like the rig (the loop's pacer, absolute deadlines);
+* lockstep: publishes ``/clock``; sample k waits for the command answering seq k (from the
+  loop's own controller at once; from one outside ``lockstep_timeout`` s of wall time, then u = 0
+  for that sample, counted); runs as fast as the loop allows; identical inputs give identical
+  outputs. With ``lockstep_recorder_window`` W > 0 the loop also keeps within W samples of a
+  recorder outside: sample k goes out once the recorder has reported (``recorder/progress``,
+  rosgraph_msgs/Clock, every :data:`rwpend_ros.qos.RECORDER_PROGRESS_EVERY` samples) the
+  ``/clock`` of sample k - W, so a recorder that runs behind (starved of CPU, a slow disk) slows
+  the run down instead of losing messages (the publishers keep 100 samples for a reader that
+  lags: QOS_CONTROL_PUB).
 
 All algorithms live in :mod:`rwpend_sim.sim_core` and :mod:`rwpend_model.plant`.
 """
@@ -23,7 +27,6 @@ from __future__ import annotations
 
 import struct
 import sys
-import threading
 import time
 from functools import partial
 
@@ -39,11 +42,10 @@ from rwpend_ros import wire
 from rwpend_ros.claim import CommandClaim, format_id
 from rwpend_ros.diagnostics import publish_diagnostic
 from rwpend_ros.health import EXIT_LOOP_DEAD, SLOW_ADVICE, LoopHealth
-from rwpend_ros.nodes import RwNode, SlackTimer, estop_subscriptions, local_subscription
+from rwpend_ros.nodes import RwNode, estop_subscriptions, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import (QOS_CONTROL, QOS_CONTROL_PUB, QOS_LATCHED, QOS_PROGRESS, QOS_STATUS, RECORDER_WINDOW_MAX, RECORDER_WINDOW_MIN)
-from rwpend_ros.runner import run_node
 from rwpend_model.rig import format_differences, rig_differences
 from rwpend_ros.trace import tracer
 from rwpend_ros.gate import CommandGate
@@ -63,7 +65,8 @@ PARAMS = [
     RO('lockstep_recorder_timeout', 5.0, 'lockstep: wall seconds without progress from a recorder that '
        'is behind before the simulator runs on without it (warned, counted in /diagnostics: the '
        'bag may then miss messages)', low=0.0, low_open=True),
-    RO('start.delay', 0.5, 'wall seconds to wait after the loop is connected, before sample 0', low=0.0),
+    RO('start.delay', 0.5, 'wall seconds to wait after the loop is connected, before sample 0 (for '
+       'discovery to settle; skipped in lockstep when the loop\'s process awaits nothing outside)', low=0.0),
     RO('start.encoders_subscribers', 1, 'subscribers of encoders to wait for before sample 0 '
        '(2 with a recorder)', low=0),
     RO('start.true_state_subscribers', 0, 'subscribers of sim/true_state to wait for before sample 0',
@@ -108,13 +111,15 @@ PARAMS = [
 
 
 class SimNode(RwNode):
-    def __init__(self, loop_lock=None, hosted: bool = False, external_command: bool = True) -> None:
-        """``loop_lock``: the loop's lock when the loop's process hosts this node
-        (rwpend_loop.host), else None. ``hosted``: the loop's process
-        runs the samples (no sample thread here; :meth:`publish_sample` is called after each
-        sample's command is written); ``external_command``: commands also come from the
-        ``command`` topic (a controller outside the loop)."""
-        self.hosted = bool(hosted)
+    #: the loop's process runs the samples (rwpend_loop.host): no timer of its own here
+    #: (rwpend_ros.nodes.SlackTimer); :meth:`publish_sample` is called after each sample's
+    #: command is written
+    hosted = True
+
+    def __init__(self, loop_lock, external_command: bool = True) -> None:
+        """``loop_lock``: the lock of the loop's process (rwpend_loop.host.LoopLock);
+        ``external_command``: commands also come from the ``command`` topic (a controller
+        outside the loop)."""
         #: called with the new e-stop state, the loop's lock held, when it changes (the loop's
         #: process gives its controller's on_estop_state)
         self.on_estop_change = None
@@ -155,9 +160,9 @@ class SimNode(RwNode):
         # verdicts count such samples (the first-seconds check only judges real time)
         self.health = LoopHealth(p['lockstep_timeout'] if self.lockstep else self.h,
                                  dead_after_s=p['loop_dead_after'])
-        #: the loop's lock: the host's (one for every node of the loop) or this node's own
-        self.lock = loop_lock.lock if self.hosted else threading.Condition()
-        self.stop = threading.Event()
+        #: the loop's lock (one for every node of the loop's process; a condition the lockstep
+        #: loop waits on for an external command or the recorder's progress)
+        self.lock = loop_lock.lock
         self.hw = SimHardware(self.core)
         self.finished = False
 
@@ -168,7 +173,7 @@ class SimNode(RwNode):
         # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
         self.sub_cmd = (local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL,
                                            sender=wire.command_sender)
-                        if external_command or not self.hosted else None)
+                        if external_command else None)
         #: one controller at a time (rwpend_ros.claim)
         try:
             self.claim = CommandClaim(p['claim_timeout_samples'])
@@ -182,14 +187,10 @@ class SimNode(RwNode):
         self.pub_estop_state.publish(Bool(data=False))
         self.create_service(Disturb, 'sim/disturb', self.on_disturb)
         self.create_service(SetBool, '~/estop', self.on_estop_service)
-        # in the loop's slack: after a command is applied, not while a command waits (19.)
-        self.diag_timer = SlackTimer(self, p['diagnostics_period'], self.publish_diagnostics)
         #: lockstep: samples this simulator may run ahead of the recorder (0: it does not wait)
         self.recorder_window = int(window) if self.lockstep else 0
         self.recorder_k = -1            # the newest sample the recorder reported (its /clock)
         self.recorder_wall = 0.0        # wall time (monotonic) of its newest report
-        self.held_for_recorder = False  # sample core.k waits for the recorder
-        self.hold_wall = 0.0            # ... since
         self.recorder_holds = 0         # samples that waited for the recorder
         self.recorder_hold_s = 0.0      # wall seconds they waited
         self.recorder_given_up = False  # the recorder stopped reporting: the run went on without it
@@ -202,16 +203,10 @@ class SimNode(RwNode):
         self.wall_start = time.monotonic()
         self.overruns = 0
         self.malformed_commands = 0
-        #: seq of the published sample whose command is awaited (the plant integrates
-        #: [t_k, t_k+1) as soon as command k arrives), None when there is none
-        self.awaiting: int | None = None
         self.steps = 0                  # samples integrated
-        self.step_wall = time.monotonic()   # lockstep: wall time of the newest sample
+        #: what sample 0 still waits for (the loop's process says it on /diagnostics), '' when none
+        self.waiting_for = ''
         self.trace = tracer('sim')      # None unless RWPEND_TRACE is set (profiling)
-        self.thread = None
-        if not self.hosted:
-            self.thread = threading.Thread(target=self._run_loop, name='sim-loop', daemon=True)
-            self.thread.start()
         mode = 'lockstep' if self.lockstep else 'real time'
         self.get_logger().info(f'simulated rig: h = {self.h * 1e3:g} ms, {mode}, '
                                f'a = {self.rig.a:.3f}, b_p = {self.rig.b_p:.4f}, b_r = {self.rig.b_r:.2f}; '
@@ -220,10 +215,9 @@ class SimNode(RwNode):
 
     # ------------------------------------------------------------ callbacks
     def on_command(self, data: bytes) -> None:
-        """A command (wire bytes). When it answers the awaited sample k, the plant is integrated
-        over [t_k, t_k+1) at once, here: in real time the next sample is then ready to go out at
-        its instant; in lockstep the next sample goes out from here, without waking another
-        thread (the loop thread only watches the lockstep timeout)."""
+        """A command from the ``command`` topic (wire bytes), offered to the gate; the loop
+        integrates the interval it answers at the next instant (real time) or as soon as it is
+        in (lockstep: the loop waits on the lock, notified here)."""
         try:
             seq, u, source, release = wire.unpack_command_sender(data)
         except (struct.error, IndexError) as exc:   # truncated bytes: counted, nothing else changes
@@ -238,11 +232,7 @@ class SimNode(RwNode):
             ok = self._offer(source, seq, u, release)
             if ok:
                 self._report(self.gate.take_event())
-            if ok and self.awaiting is not None and self.core.u_seq >= self.awaiting:
-                self._step()
-            if self.hosted:
-                self.lock.notify_all()       # a lockstep loop waiting for this command
-        self.diag_timer.sample_done()
+            self.lock.notify_all()           # a lockstep loop waiting for this command
 
     def _offer(self, source: int, seq: int, u: float, release: bool) -> bool:
         """Lock held: the command (seq, u) of controller ``source`` to the plant, if that
@@ -269,8 +259,8 @@ class SimNode(RwNode):
         return ', '.join(sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos)) or 'none'
 
     def on_recorder_progress(self, data: bytes) -> None:
-        """The recorder's progress (the newest ``/clock`` it took, wire bytes): a sample held
-        for it goes out once it is within ``lockstep_recorder_window`` samples."""
+        """The recorder's progress (the newest ``/clock`` it took, wire bytes): a sample the loop
+        holds for it goes out once it is within ``lockstep_recorder_window`` samples."""
         try:
             k = wire.unpack_clock_ns(data) // self.period_ns
         except (struct.error, IndexError, ValueError):
@@ -281,18 +271,11 @@ class SimNode(RwNode):
             self.recorder_wall = time.monotonic()
             if k > self.recorder_k:
                 self.recorder_k = k
-            if self.held_for_recorder and not self._recorder_behind():
-                self._release_hold()
-                if not self.stop.is_set():
-                    self._publish_lockstep()
+            self.lock.notify_all()           # a lockstep loop holding a sample for it
 
-    def _recorder_behind(self) -> bool:
-        """Lock held: sample core.k must wait for the recorder."""
-        return bool(self.recorder_window) and self.core.k - self.recorder_window > self.recorder_k
-
-    def _release_hold(self) -> None:
-        self.held_for_recorder = False
-        self.recorder_hold_s += time.monotonic() - self.hold_wall
+    def recorder_behind(self, k: int) -> bool:
+        """Lock held: sample k must wait for the recorder (``lockstep_recorder_window``)."""
+        return bool(self.recorder_window) and k - self.recorder_window > self.recorder_k
 
     def set_estop(self, on: bool) -> str:
         with self.lock:
@@ -339,10 +322,9 @@ class SimNode(RwNode):
         return resp
 
     # ------------------------------------------------------------ publishing
-    def publish_sample(self, stamp_ns: int, reading: Reading | None = None) -> bytes:
-        """Sample core.k (or ``reading``, taken by the loop) as wire bytes: encoders, then /clock
-        (lockstep), then sim/true_state; returns the encoders' bytes."""
-        r = self.hw.read() if reading is None else reading
+    def publish_sample(self, stamp_ns: int, r: Reading) -> bytes:
+        """Sample ``r`` (taken by the loop) as wire bytes: encoders, then /clock (lockstep), then
+        sim/true_state; returns the encoders' bytes."""
         seq = r.seq
         if self.trace is not None:
             self.trace('sim.pub', seq)
@@ -360,152 +342,11 @@ class SimNode(RwNode):
             self.pub_true.publish(wire.pack_plant_state(
                 header, seq, s.command_seq, s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate,
                 s.u_applied, s.torque, s.friction, s.disturbance, s.stuck, s.timed_out))
-        if not self.hosted:
-            self.awaiting = seq
         return enc
 
     def done(self) -> bool:
         d = self.p['duration']
         return d > 0 and self.core.plant.t >= d - 1e-9
-
-    def wait_for_loop(self, need_command: bool) -> None:
-        """Hold sample 0 until the estimator (and a recorder, if asked) are subscribed, so
-        nothing of the run is missed; then let discovery settle."""
-        n_enc = self.p['start.encoders_subscribers']
-        n_true = self.p['start.true_state_subscribers']
-        while not self.stop.is_set():
-            if (self.pub_enc.get_subscription_count() >= n_enc
-                    and self.pub_true.get_subscription_count() >= n_true
-                    and (not need_command or (
-                        self.count_publishers(self.resolve_topic_name('command')) > 0
-                        and self.count_subscribers(self.resolve_topic_name('state'))
-                        >= self.p['start.state_subscribers']
-                        # the recorder this run keeps pace with takes /clock (its progress)
-                        and (not self.recorder_window or self.pub_clock.get_subscription_count() > 0)))):
-                break
-            time.sleep(0.02)
-        time.sleep(self.p['start.delay'])
-        self.wall_start = time.monotonic()
-
-    def _run_loop(self) -> None:
-        """The loop thread.  SIGINT shuts the context down under it (rclpy's handler runs before
-        close()): a publish failing then is the normal end, not an error."""
-        try:
-            (self.loop_lockstep if self.lockstep else self.loop_realtime)()
-        except Exception:  # noqa: BLE001 - re-raised unless the context is gone
-            if self.context.ok() and not self.stop.is_set():
-                raise
-
-    def loop_realtime(self) -> None:
-        """Sample k goes out at t0 + k h (absolute deadlines on the monotonic clock). The plant is
-        integrated over [t_k, t_k+1) when command k arrives (:meth:`on_command`), or at t_k+1 with
-        the command held then if it did not: so at each instant only the publishing is left."""
-        self.wait_for_loop(need_command=False)
-        period_ns = self.period_ns
-        t0_ros = self.get_clock().now().nanoseconds
-        t0 = time.monotonic_ns()
-        k = 0
-        while not self.stop.is_set():
-            if not self._tick(t0_ros + k * period_ns, t0 + k * period_ns):
-                break
-            k += 1
-            delay = t0 + k * period_ns - time.monotonic_ns()
-            if delay > 0:
-                time.sleep(delay / 1e9)
-            elif delay < -period_ns:
-                self.overruns += 1
-        self.finish()
-
-    def _tick(self, stamp_ns: int, tick_ns: int) -> bool:
-        """The sample instant: the held command if command k-1 did not come, then sample k;
-        False when the run is done."""
-        with self.lock:
-            if self.awaiting is not None:      # command k-1 not in time: the held one
-                self.awaiting = None
-                self._advance(late=True)
-            if self.done():
-                return False
-            if self.trace is not None:
-                self.trace('sim.tick', self.core.k, tick_ns)
-            self.publish_sample(stamp_ns)
-        return True
-
-    def _step(self, late: bool = False) -> None:
-        """Lock held, command for the awaited sample in (or, ``late``, given up on): integrate;
-        lockstep: the next sample."""
-        self.awaiting = None
-        self._advance(late)
-        self.steps += 1
-        if self.lockstep:
-            if self.done() or self.stop.is_set():
-                self.lock.notify_all()             # the loop thread finishes
-            elif self._recorder_behind():          # on_recorder_progress publishes it
-                self.held_for_recorder = True
-                self.hold_wall = time.monotonic()
-                self.recorder_holds += 1
-            else:
-                self._publish_lockstep()
-
-    def _publish_lockstep(self) -> None:
-        stamp = self.core.k * self.period_ns
-        self.step_wall = time.monotonic()
-        if self.trace is not None:
-            self.trace('sim.tick', self.core.k)
-        self.publish_sample(stamp)
-
-    def loop_lockstep(self) -> None:
-        """Publishes sample 0, then watches: each command answering the awaited sample steps
-        the plant and publishes the next (:meth:`on_command`); a sample whose command does not
-        come within ``lockstep_timeout`` wall seconds (``start.first_command_timeout`` for
-        sample 0) is integrated with u = 0 and counted late. A sample held for the recorder
-        (``lockstep_recorder_window``) waits for its progress; after
-        ``lockstep_recorder_timeout`` s without any, the run goes on without waiting for it."""
-        self.wait_for_loop(need_command=True)
-        timeout = self.p['lockstep_timeout']
-        with self.lock:
-            self._publish_lockstep()
-            while not self.stop.is_set() and not self.done():
-                if self.held_for_recorder:
-                    limit = self.p['lockstep_recorder_timeout']
-                    remaining = max(self.recorder_wall, self.hold_wall) + limit - time.monotonic()
-                    if remaining > 0:
-                        self.lock.wait(min(remaining, timeout))
-                        continue
-                    self.get_logger().error(
-                        f'lockstep: the recorder reported no progress for {limit:g} s while '
-                        f'{self.core.k - self.recorder_k} samples behind; running on without waiting '
-                        'for it (the bag may miss messages)')
-                    self.recorder_window = 0
-                    self.recorder_given_up = True
-                    self._release_hold()
-                    self._publish_lockstep()
-                    continue
-                limit = timeout if self.core.k else self.p['start.first_command_timeout']
-                remaining = self.step_wall + limit - time.monotonic()
-                if remaining > 0:
-                    # notified at stop and at the end only (a step does not wake this thread):
-                    # look again at least every lockstep_timeout
-                    self.lock.wait(min(remaining, timeout))
-                    continue
-                if self.core.k == 0:
-                    self.get_logger().warn('lockstep: no command for sample 0 within '
-                                           f"{self.p['start.first_command_timeout']:g} s; running with u = 0")
-                self.core.counters.late_commands += 1
-                self.core.no_command()            # no command for this sample: u = 0
-                self._step(late=True)
-        self.finish()
-
-    def _advance(self, late: bool = False) -> None:
-        """One sample of the plant (``late``: its command did not come in time); /diagnostics at
-        once when the command timeout starts, so the reason for u = 0 is reported when it
-        happens (not up to a diagnostics period later), and when the loop's health changes."""
-        was = self.core.timed_out
-        self.gate.interval(late)
-        event = self.gate.take_event()
-        if event is not None:
-            self._report(event)
-        elif self.core.timed_out and not was:
-            self.publish_diagnostics()
 
     def _report(self, event: str | None) -> None:
         """The loop's health changed (rwpend_ros.health): said at once, in the log and on
@@ -561,6 +402,8 @@ class SimNode(RwNode):
                 f'{format_id(self.claim.holder)}')
         elif c.rejected_commands:
             level, msg = DiagnosticStatus.WARN, f'rejected commands: {c.last_reject_reason}'
+        elif self.waiting_for:
+            level, msg = DiagnosticStatus.OK, f'waiting before sample 0 for {self.waiting_for}'
         elif self.recorder_given_up:
             level, msg = DiagnosticStatus.WARN, ('lockstep ran on without the recorder (no progress '
                                                  'from it): the bag may miss messages')
@@ -592,20 +435,7 @@ class SimNode(RwNode):
                            values)
 
     def close(self) -> None:
-        self.stop.set()
-        with self.lock:
-            self.lock.notify_all()
-        if self.thread is not None:
-            self.thread.join(timeout=2.0)
         try:
             self.publish_diagnostics()
         except Exception:  # noqa: BLE001 - context may be gone
             pass
-
-
-def main(args=None) -> int:
-    return run_node(SimNode, args)
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())
