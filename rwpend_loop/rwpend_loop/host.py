@@ -376,10 +376,9 @@ class Host:
         self.sim.overruns = pacer.overruns
 
     def _run_lockstep(self) -> None:
-        if self.ctrl is None:
-            return self._run_lockstep_external()
         sim = self.sim
         period = self.period_ns
+        external = self.ctrl is None
         writer = self.recorder.writer if self.recorder is not None else None
         k = 0
         cond = self.lock.lock
@@ -391,83 +390,12 @@ class Host:
                     sim.trace('sim.tick', k)
                 if not self._sample(k, k * period):
                     break
+                if external:
+                    self._await_command(k)
             if writer is not None and writer.queue_size() > RECORD_QUEUE_LIMIT:
-                self._wait_for_writer(writer)
+                while writer.queue_size() > RECORD_QUEUE_LIMIT // 2 and not self.stop.is_set():
+                    time.sleep(0.001)        # the bag writer catches up: nothing is lost
             k += 1
-
-    def _wait_for_writer(self, writer) -> None:
-        while writer.queue_size() > RECORD_QUEUE_LIMIT // 2 and not self.stop.is_set():
-            time.sleep(0.001)        # the bag writer catches up: nothing is lost
-
-    # lockstep with the controller outside: sample k goes out, then the loop waits for the command
-    # answering it. The command's callback (the simulator's ``command`` subscription, in the
-    # executor's thread, holding the loop's lock) takes the next sample itself when nothing has to
-    # wait -- no hand-over to this thread per sample (measured: 20-25 % of the split layouts'
-    # lockstep speed); this thread takes it when the recorder must be waited for, and watches
-    # ``lockstep_timeout``.
-    _next = 0                       # the next sample to take
-    _awaiting = None                # the sample whose command is awaited (None: none)
-    _await_since = 0.0              # wall time it went out
-    _over = False                   # the run is done
-
-    def _run_lockstep_external(self) -> None:
-        sim = self.sim
-        cond = self.lock.lock
-        with cond:
-            sim.on_command_taken = self._on_command_taken
-            self._take_next()
-            while not self.stop.is_set() and not self._over:
-                k = self._awaiting
-                if k is None:                       # left to this thread: the recorder is behind
-                    self._take_next()
-                    continue
-                limit = sim.p['lockstep_timeout'] if k else sim.p['start.first_command_timeout']
-                remaining = self._await_since + limit - time.monotonic()
-                if remaining > 0:
-                    cond.wait(remaining)
-                    continue
-                if k == 0:
-                    sim.get_logger().warn(f'lockstep: no command for sample 0 within {limit:g} s; '
-                                          'running with u = 0')
-                sim.core.counters.late_commands += 1
-                sim.core.no_command()
-                was = sim.core.timed_out
-                self.loop.finish_interval(late=True)
-                self._after_interval(was)
-                self._awaiting = None
-            sim.on_command_taken = None
-
-    def _take_next(self) -> None:
-        """Lock held: the next sample out (after the recorder outside, if it is behind: this
-        thread only); the run is over when the simulator's duration is reached."""
-        sim = self.sim
-        k = self._next
-        if sim.recorder_behind(k):
-            self._hold_for_recorder(k)
-        if sim.trace is not None:
-            sim.trace('sim.tick', k)
-        if not self._sample(k, k * self.period_ns):
-            self._over = True
-            self._awaiting = None
-            return
-        self._next = k + 1
-        self._awaiting = k
-        self._await_since = time.monotonic()
-
-    def _on_command_taken(self) -> None:
-        """Lock held, in the command's callback: when it answers the awaited sample, the next
-        sample goes out from here, unless the recorder outside is behind (this thread waits for
-        it) or the run is stopping."""
-        k = self._awaiting
-        if k is None or self.sim.core.u_seq < k:
-            return
-        if self.sim.recorder_behind(self._next) or self.stop.is_set():
-            self._awaiting = None
-            self.lock.lock.notify_all()
-            return
-        self._take_next()
-        if self._over:
-            self.lock.lock.notify_all()
 
     def _hold_for_recorder(self, k: int) -> None:
         """Lockstep, lock held: sample k waits until the recorder outside has reported sample
@@ -491,6 +419,26 @@ class Host:
                 break
             self.lock.lock.wait(remaining)
         sim.recorder_hold_s += time.monotonic() - hold
+
+    def _await_command(self, k: int) -> None:
+        """Lockstep, lock held: wait for the external controller's command answering k
+        (``lockstep_timeout`` of wall time; sample 0 ``start.first_command_timeout``)."""
+        sim = self.sim
+        limit = sim.p['lockstep_timeout'] if k else sim.p['start.first_command_timeout']
+        deadline = time.monotonic() + limit
+        while sim.core.u_seq < k and not self.stop.is_set():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                if k == 0:
+                    sim.get_logger().warn(f'lockstep: no command for sample 0 within {limit:g} s; '
+                                          'running with u = 0')
+                sim.core.counters.late_commands += 1
+                sim.core.no_command()
+                was = sim.core.timed_out
+                self.loop.finish_interval(late=True)
+                self._after_interval(was)
+                return
+            self.lock.lock.wait(remaining)
 
     # ------------------------------------------------------------------ life
     def start(self) -> None:

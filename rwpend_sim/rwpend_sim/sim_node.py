@@ -123,9 +123,6 @@ class SimNode(RwNode):
         #: called with the new e-stop state, the loop's lock held, when it changes (the loop's
         #: process gives its controller's on_estop_state)
         self.on_estop_change = None
-        #: called, the loop's lock held, after a command from the topic was taken (the lockstep
-        #: loop with its controller outside takes the next sample there), or None
-        self.on_command_taken = None
         super().__init__('sim', loop_lock=loop_lock)
         self.param_table = ParameterTable(self)
         self.rig = declare_rig(self.param_table)   # the plant's physical truth
@@ -220,7 +217,7 @@ class SimNode(RwNode):
     def on_command(self, data: bytes) -> None:
         """A command from the ``command`` topic (wire bytes), offered to the gate; the loop
         integrates the interval it answers at the next instant (real time) or as soon as it is
-        in (lockstep: :attr:`on_command_taken` takes the next sample)."""
+        in (lockstep: the loop waits on the lock, notified here)."""
         try:
             seq, u, source, release = wire.unpack_command_sender(data)
         except (struct.error, IndexError) as exc:   # truncated bytes: counted, nothing else changes
@@ -235,8 +232,7 @@ class SimNode(RwNode):
             ok = self._offer(source, seq, u, release)
             if ok:
                 self._report(self.gate.take_event())
-                if self.on_command_taken is not None:
-                    self.on_command_taken()
+            self.lock.notify_all()           # a lockstep loop waiting for this command
 
     def _offer(self, source: int, seq: int, u: float, release: bool) -> bool:
         """Lock held: the command (seq, u) of controller ``source`` to the plant, if that
