@@ -83,106 +83,111 @@ def to_json(obj) -> bytes:
     return json.dumps(finite(obj), separators=(',', ':')).encode()
 
 
+class ConsoleHandler(BaseHTTPRequestHandler):
+    """The request handler of a console: routes, access checks and the event stream. Its
+    subclass made by :func:`make_handler` binds the app, the access policy and the assets."""
+    app: ConsoleApp
+    policy: AccessPolicy
+    statics: dict[str, Path]
+    protocol_version = 'HTTP/1.1'
+    server_version = 'rwpend-console'
+
+    def log_message(self, fmt, *args):   # quiet: errors only (log_error)
+        pass
+
+    def _send(self, status: int, body: bytes, ctype: str = 'application/json') -> None:
+        self.send_response(status)
+        self.send_header('Content-Type', ctype)
+        self.send_header('Content-Length', str(len(body)))
+        self.send_header('Cache-Control', 'no-store')
+        self.send_header('X-Content-Type-Options', 'nosniff')
+        self.end_headers()
+        self.wfile.write(body)
+
+    def _refuse(self, status: int, reason: str) -> None:
+        self._send(status, to_json({'ok': False, 'error': reason}))
+
+    def _allowed(self, action: str) -> bool:
+        v = self.policy.check(action, self.command, dict(self.headers.items()))
+        if not v.ok:
+            self._refuse(v.status, v.reason)
+        return v.ok
+
+    def do_GET(self) -> None:
+        url = urlsplit(self.path)
+        query = {k: v[-1] for k, v in parse_qs(url.query).items()}
+        if not self._allowed(VIEW):
+            return
+        if url.path in ('/', '/index.html'):
+            return self._send(200, self.statics['index.html'].read_bytes(), CONTENT_TYPES['.html'])
+        if url.path.startswith('/static/') and url.path[8:] in self.statics:
+            f = self.statics[url.path[8:]]
+            return self._send(200, f.read_bytes(), CONTENT_TYPES[f.suffix])
+        if url.path == '/api/stream':
+            return self._stream(query.get('rig'))
+        if url.path == '/api/info':
+            return self._send(200, to_json({'token_required': self.policy.token_required,
+                                            'listen': self.policy.listen, 'window_s': self.app.window_s}))
+        try:
+            if url.path == '/api/plot':
+                return self._send(200, self.app.plot(query.get('bag')).read_bytes(), 'image/png')
+            if url.path == '/lab/report':
+                return self._send(200, self.app.lab_report(query.get('run')).read_bytes(), CONTENT_TYPES['.html'])
+            if url.path in GET_ROUTES:
+                return self._send(200, to_json(GET_ROUTES[url.path](self.app, query)))
+        except RequestError as exc:
+            return self._refuse(exc.status, exc.reason)
+        self._refuse(404, f'no such page: {url.path}')
+
+    def do_POST(self) -> None:
+        path = urlsplit(self.path).path
+        self.close_connection = True     # until the body is read: a refusal leaves it unread
+        if path not in POST_ROUTES:
+            return self._refuse(404, f'no such request: {path}')
+        action, fn = POST_ROUTES[path]
+        if not self._allowed(action):
+            return
+        try:
+            n = int(self.headers.get('Content-Length', '0'))
+        except ValueError:
+            n = -1
+        if not 0 <= n <= MAX_BODY:
+            return self._refuse(413, f'a request body of 0..{MAX_BODY} bytes, with Content-Length')
+        data = self.rfile.read(n)
+        self.close_connection = False
+        try:
+            body = json.loads(data or b'{}')
+        except ValueError as exc:
+            return self._refuse(400, f'the body is not JSON: {exc}')
+        try:
+            self._send(200, to_json(fn(self.app, body)))
+        except RequestError as exc:
+            self._refuse(exc.status, exc.reason)
+
+    def _stream(self, rig) -> None:
+        try:
+            w, ns, rid = self.app.rig(rig)
+        except RequestError as exc:
+            return self._refuse(exc.status, exc.reason)
+        self.close_connection = True
+        self.send_response(200)
+        self.send_header('Content-Type', 'text/event-stream')
+        self.send_header('Cache-Control', 'no-store')
+        self.send_header('Connection', 'close')
+        self.end_headers()
+        feed = w.watch(ns)
+        try:
+            stream_events(self.wfile, self.app, feed, rid)
+        except (BrokenPipeError, ConnectionError, socket.timeout, OSError):
+            pass
+        finally:
+            w.unwatch(ns)
+
+
 def make_handler(app: ConsoleApp, policy: AccessPolicy, static_dir: Path = STATIC_DIR):
     """The request handler class of one console (bound to its app and policy)."""
     statics = {f.name: f for f in static_dir.iterdir() if f.suffix in CONTENT_TYPES}
-
-    class Handler(BaseHTTPRequestHandler):
-        protocol_version = 'HTTP/1.1'
-        server_version = 'rwpend-console'
-
-        def log_message(self, fmt, *args):   # quiet: errors only (log_error)
-            pass
-
-        def _send(self, status: int, body: bytes, ctype: str = 'application/json') -> None:
-            self.send_response(status)
-            self.send_header('Content-Type', ctype)
-            self.send_header('Content-Length', str(len(body)))
-            self.send_header('Cache-Control', 'no-store')
-            self.send_header('X-Content-Type-Options', 'nosniff')
-            self.end_headers()
-            self.wfile.write(body)
-
-        def _refuse(self, status: int, reason: str) -> None:
-            self._send(status, to_json({'ok': False, 'error': reason}))
-
-        def _allowed(self, action: str) -> bool:
-            v = policy.check(action, self.command, dict(self.headers.items()))
-            if not v.ok:
-                self._refuse(v.status, v.reason)
-            return v.ok
-
-        def do_GET(self) -> None:
-            url = urlsplit(self.path)
-            query = {k: v[-1] for k, v in parse_qs(url.query).items()}
-            if not self._allowed(VIEW):
-                return
-            if url.path in ('/', '/index.html'):
-                return self._send(200, statics['index.html'].read_bytes(), CONTENT_TYPES['.html'])
-            if url.path.startswith('/static/') and url.path[8:] in statics:
-                f = statics[url.path[8:]]
-                return self._send(200, f.read_bytes(), CONTENT_TYPES[f.suffix])
-            if url.path == '/api/stream':
-                return self._stream(query.get('rig'))
-            if url.path == '/api/info':
-                return self._send(200, to_json({'token_required': policy.token_required,
-                                                'listen': policy.listen, 'window_s': app.window_s}))
-            try:
-                if url.path == '/api/plot':
-                    return self._send(200, app.plot(query.get('bag')).read_bytes(), 'image/png')
-                if url.path == '/lab/report':
-                    return self._send(200, app.lab_report(query.get('run')).read_bytes(), CONTENT_TYPES['.html'])
-                if url.path in GET_ROUTES:
-                    return self._send(200, to_json(GET_ROUTES[url.path](app, query)))
-            except RequestError as exc:
-                return self._refuse(exc.status, exc.reason)
-            self._refuse(404, f'no such page: {url.path}')
-
-        def do_POST(self) -> None:
-            path = urlsplit(self.path).path
-            self.close_connection = True     # until the body is read: a refusal leaves it unread
-            if path not in POST_ROUTES:
-                return self._refuse(404, f'no such request: {path}')
-            action, fn = POST_ROUTES[path]
-            if not self._allowed(action):
-                return
-            try:
-                n = int(self.headers.get('Content-Length', '0'))
-            except ValueError:
-                n = -1
-            if not 0 <= n <= MAX_BODY:
-                return self._refuse(413, f'a request body of 0..{MAX_BODY} bytes, with Content-Length')
-            data = self.rfile.read(n)
-            self.close_connection = False
-            try:
-                body = json.loads(data or b'{}')
-            except ValueError as exc:
-                return self._refuse(400, f'the body is not JSON: {exc}')
-            try:
-                self._send(200, to_json(fn(app, body)))
-            except RequestError as exc:
-                self._refuse(exc.status, exc.reason)
-
-        def _stream(self, rig) -> None:
-            try:
-                w, ns, rid = app.rig(rig)
-            except RequestError as exc:
-                return self._refuse(exc.status, exc.reason)
-            self.close_connection = True
-            self.send_response(200)
-            self.send_header('Content-Type', 'text/event-stream')
-            self.send_header('Cache-Control', 'no-store')
-            self.send_header('Connection', 'close')
-            self.end_headers()
-            feed = w.watch(ns)
-            try:
-                stream_events(self.wfile, app, feed, rid)
-            except (BrokenPipeError, ConnectionError, socket.timeout, OSError):
-                pass
-            finally:
-                w.unwatch(ns)
-
-    return Handler
+    return type('Handler', (ConsoleHandler,), {'app': app, 'policy': policy, 'statics': statics})
 
 
 def event(name: str, obj) -> bytes:
