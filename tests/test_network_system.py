@@ -348,7 +348,7 @@ def test_two_rigs_in_one_domain_separated_by_namespace(tmp_path, netlab, lab_env
     """Two rigs in the same domain, only their namespaces apart: no node of one takes a topic
     from the other (the graph, from every node's subscriptions), each plant obeys its own
     controller only, and ./rwpend estop --ns /rigb stops rig b only."""
-    from rwpend_bringup.rostools import foreign_publishers
+    from rwpend_ros.tools import foreign_publishers
     domain = int(lab_env['ROS_DOMAIN_ID'])
     rigs = [('/riga', domain, 0.2), ('/rigb', domain, 0.4)]
     (a, b, c), runs = start_rigs(netlab, tmp_path, rigs)

@@ -799,7 +799,7 @@ def demo_main(argv) -> int:
 
 # ------------------------------------------------------------------ param / mode / tap / estop
 def _tool(ns):
-    from .rostools import RosTool
+    from rwpend_ros.tools import RosTool
     return RosTool(ns)
 
 
@@ -828,7 +828,7 @@ def param_main(argv) -> int:
     s.add_argument('node')
     s.add_argument('names', nargs='*', help='parameters (default: all)')
     a = p.parse_args(argv)
-    from .rostools import ToolError, format_descriptor, format_value, parse_value
+    from rwpend_ros.tools import ToolError, format_descriptor, format_value, parse_value
     if a.cmd == 'set' and len(a.pairs) % 2:
         return fail(p.prog, 'set expects NAME VALUE pairs')
     try:
@@ -894,7 +894,7 @@ def mode_main(argv) -> int:
     p.add_argument('mode', choices=MODES)
     p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS)
     a = p.parse_args(argv)
-    from .rostools import ToolError
+    from rwpend_ros.tools import ToolError
     try:
         with _tool(a.ns) as t:
             ok, msg = t.set_mode(a.mode)
@@ -912,7 +912,7 @@ def tap_main(argv) -> int:
     p.add_argument('--seconds', type=float, default=0.5)
     p.add_argument('--ns', type=namespace_arg, default=DEFAULT_NS)
     a = p.parse_args(argv)
-    from .rostools import ToolError
+    from rwpend_ros.tools import ToolError
     try:
         with _tool(a.ns) as t:
             ok, msg = t.disturb(1 if a.torque else 0, a.dv, a.seconds if a.torque else 0.0)
@@ -931,7 +931,7 @@ def estop_main(argv) -> int:
                    help='seconds to find the e-stop services and for each to answer (default 5; '
                    'discovery on a busy lab network can take longer)')
     a = p.parse_args(argv)
-    from .rostools import RosTool, ToolError
+    from rwpend_ros.tools import RosTool, ToolError
     if not a.timeout > 0:
         return fail(p.prog, f'--timeout must be > 0, got {a.timeout}')
     try:
@@ -954,7 +954,7 @@ def graph_main(argv) -> int:
     p.add_argument('--settle', type=float, default=3.0, help='seconds of discovery first (default 3)')
     p.add_argument('--json', action='store_true', help='the graph as JSON')
     a = p.parse_args(argv)
-    from .rostools import RosTool, foreign_publishers
+    from rwpend_ros.tools import RosTool, foreign_publishers
     with RosTool('/') as t:
         g = t.graph(a.settle)
     if a.json:

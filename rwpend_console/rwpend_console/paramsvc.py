@@ -9,7 +9,7 @@ from typing import Any, Callable
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters, SetParameters
 
-from rwpend_bringup.rostools import ToolError, from_parameter_value, to_parameter_value
+from rwpend_ros.tools import ToolError, from_parameter_value, to_parameter_value
 
 from .panel import TYPE_NAMES, Field, build_fields
 

@@ -149,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def apply(params: dict, namespace: str) -> int:
     """Set ``params`` on the running controller atomically (SetParametersAtomically)."""
-    from rwpend_bringup.rostools import RosTool, ToolError, to_parameter_value
+    from rwpend_ros.tools import RosTool, ToolError, to_parameter_value
     try:
         with RosTool(namespace) as t:
             ok, reason = t.set_params_atomically('controller', {n: to_parameter_value(float(v))

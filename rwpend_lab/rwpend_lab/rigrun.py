@@ -118,7 +118,7 @@ class Monitor:
     def _run(self) -> None:
         from rcl_interfaces.msg import Parameter
         from rcl_interfaces.srv import SetParameters
-        from rwpend_bringup.rostools import RosTool, to_parameter_value
+        from rwpend_ros.tools import RosTool, to_parameter_value
         from rwpend_msgs.msg import EncoderCounts, MotorCommand
         from rwpend_ros.qos import QOS_CONTROL
         from rwpend_ros.runner import make_executor

@@ -1,4 +1,4 @@
-"""rwpend_bringup.rostools without a running node: values parsed as ``ros2 param set`` parses
+"""rwpend_ros.tools without a running node: values parsed as ``ros2 param set`` parses
 them (YAML 1.1), descriptors printed, file values compared."""
 import pytest
 
@@ -6,8 +6,8 @@ pytest.importorskip('rclpy')
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType  # noqa: E402
 
-from rwpend_bringup.rostools import (ToolError, _same, format_descriptor, parse_value,  # noqa: E402
-                                     to_parameter_value)
+from rwpend_ros.tools import (ToolError, _same, format_descriptor, parse_value,  # noqa: E402
+                              to_parameter_value)
 
 T = ParameterType
 

@@ -1,5 +1,7 @@
-"""Small ROS 2 clients of the CLI: parameters (the standard rcl_interfaces services, as
-``ros2 param`` uses them), the controller's mode, the simulator's disturbances, the e-stop.
+"""Small, short-lived ROS 2 clients for the command-line tools (``./rwpend param``, ``gains
+--apply``, the lab's monitor, the console): parameters (the standard rcl_interfaces services, as
+``ros2 param`` uses them), the controller's mode, the simulator's disturbances, the e-stop, the
+graph.
 
 Every call is bounded in time and returns (ok, message); nothing here raises on a missing node.
 """
