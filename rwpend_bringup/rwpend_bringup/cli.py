@@ -36,32 +36,11 @@ import sys
 import time
 from pathlib import Path
 
-from .launch import DEFAULT_NS, Launcher, NodeSpec
+from .launch import DEFAULT_NS, Launcher
+from .stack import (COMPOSITIONS, DEFAULT_RT_PRIORITY, MODES, NODE_ARGS, NODE_MODULES, Stack,
+                    check_override_types, namespace, overrides_from, parse_pins, plan, rig_file, stack_file)
 
 ROOT = Path(os.environ.get('RWPEND_ROOT', Path(__file__).resolve().parents[2]))
-MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto', 'law')
-NODE_MODULES = {
-    'sim': 'rwpend_loop.host',     # the loop's process with the simulator alone (NODE_ARGS)
-    'estimator': 'rwpend_estimation.estimator_node',
-    'controller': 'rwpend_control.controller_node',
-    'driver': 'rwpend_driver.driver_node',
-}
-#: the arguments of a node's process before --ros-args
-NODE_ARGS = {'sim': ['sim']}
-#: ``--composed`` values: which nodes share the loop's process (rwpend_loop.host); ``loop``: the
-#: plant, estimator, controller and recorder; ``control``: the estimator and the controller,
-#: fed by the plant's ``encoders`` topic (rwpend_loop.control), the plant in a process of its own
-COMPOSITIONS = ('loop', 'control')
-#: ./rwpend up --lockstep --record: samples the simulator may run ahead of the recorder
-LOCKSTEP_RECORDER_WINDOW = 50
-#: ./rwpend up in real time: the loop's SCHED_FIFO priority where permitted (--rt-priority)
-DEFAULT_RT_PRIORITY = 50
-#: ./rwpend up without --composed: the layout per plant (PERFORMANCE.md, "Layouts")
-DEFAULT_LAYOUT = {'sim': 'loop', 'serial': 'loop'}
-LAYOUT_TEXT = {'loop': 'the loop in one real-time thread of one process (plant, estimator, controller '
-                       'and the recorder as its nodes)',
-               'none': 'separate processes (plant, estimator, controller)',
-               'control': 'estimator + controller in one loop process, the plant in its own'}
 
 
 class Parser(argparse.ArgumentParser):
@@ -74,15 +53,6 @@ class Parser(argparse.ArgumentParser):
 def fail(prog: str, msg: str, status: int = 2) -> int:
     print(f'{prog}: error: {msg}', file=sys.stderr, flush=True)
     return status
-
-
-def rig_file() -> Path:
-    from rwpend_model.rig import default_rig_file
-    return default_rig_file()
-
-
-def stack_file() -> Path:
-    return Path(__file__).resolve().parent / 'config' / 'stack.yaml'
 
 
 def apply_network_defaults(env=None) -> None:
@@ -102,65 +72,12 @@ def apply_network_defaults(env=None) -> None:
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', str(net.get('discovery_range', 'LOCALHOST')))
 
 
-def parse_assignment(text: str) -> tuple[str, str, object]:
-    """'controller.balance.kpp=-280' -> ('controller', 'balance.kpp', -280.0 as YAML reads it)."""
-    import yaml
-    if '=' not in text:
-        raise ValueError(f'expected NODE.PARAM=VALUE, got {text!r}')
-    lhs, rhs = text.split('=', 1)
-    if '.' not in lhs:
-        raise ValueError(f'expected NODE.PARAM=VALUE, got {text!r}')
-    node, name = lhs.split('.', 1)
-    if node not in ('sim', 'estimator', 'controller', 'driver', 'rig') or not name:
-        raise ValueError(f'unknown node {node!r} in {text!r} (sim, estimator, controller, driver, rig)')
-    try:
-        value = yaml.safe_load(rhs)
-    except yaml.YAMLError as exc:
-        raise ValueError(f'cannot read the value of {text!r}: {exc}') from exc
-    if value is None or isinstance(value, dict):
-        raise ValueError(f'no usable value in {text!r}')
-    return node, name, value
-
-
-def check_override_types(files, params: dict[str, dict], rig: dict, flag: str = '--set',
-                         rig_path=None) -> None:
-    """Each value of a ``--params`` file or a ``--set`` must have the type of the value it
-    overrides (rig.yaml, stack.yaml, an earlier ``--params``): rcl keeps the earlier value,
-    silently, when a later file gives another type (measured with rclpy 7.1.6: ``soon`` over 0.5
-    and 2.5 over 1 are ignored). An integer where a float was is fine (the nodes take it as
-    that float). ``params``: the ``--set`` values per node (``flag``: ``-p`` of ``rwpend node``),
-    ``rig``: those of ``rig.*``; where such a value overrides a string and YAML read it as a
-    boolean (``mode=off``: false), it is replaced by the string the nodes take for it, 'off' /
-    'on' (rwpend_ros.paramspec). ValueError with the reason otherwise, before anything starts."""
-    from rwpend_model.rig import read_params_file, typed_like
-    for node in params:
-        seen = {**read_params_file(rig_path or rig_file(), node), **read_params_file(stack_file(), node)}
-        sources = [(str(f), read_params_file(f, node)) for f in files]
-        sources.append((flag, {**params[node], **rig}))
-        for source, values in sources:
-            for name, value in values.items():
-                if name in seen and value is not None:
-                    if source == flag and isinstance(seen[name], str) and isinstance(value, bool):
-                        value = 'on' if value else 'off'
-                        params[node][name] = value
-                    try:
-                        typed_like(name, value, seen[name])
-                    except ValueError as exc:
-                        where = (f'{source} ({node})' if source != flag else f'{flag} {name}'
-                                 if name in rig or flag != '--set' else f'--set {node}.{name}')
-                        hint = (" (YAML reads on/off/yes/no as true/false: quote the string, 'off')"
-                                if isinstance(value, bool) and isinstance(seen[name], str) else '')
-                        raise ValueError(f'{where}: {exc} (the type of {seen[name]!r} it overrides; '
-                                         f'ROS would keep that value){hint}') from None
-                seen[name] = value
-
-
 def namespace_arg(ns: str) -> str:
-    ns = '/' + ns.strip('/')
-    import re
-    if ns != '/' and not re.fullmatch(r'(/[A-Za-z][A-Za-z0-9_]*)+', ns):
-        raise argparse.ArgumentTypeError(f'invalid namespace {ns!r} (letters, digits, _; e.g. /rig2)')
-    return ns
+    """``--ns``: :func:`rwpend_bringup.stack.namespace` for argparse."""
+    try:
+        return namespace(ns)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 # ------------------------------------------------------------------ up
@@ -231,314 +148,24 @@ def add_stack_args(p: argparse.ArgumentParser) -> None:
                    'recorder. See docs/network.md.')
 
 
-def usable_cpus() -> set[int]:
-    """The CPUs this process may run on (its affinity: a container or a cgroup may allow fewer
-    than the machine has)."""
-    try:
-        return set(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return set(range(os.cpu_count() or 1))
-
-
-def parse_pins(pins: list[str], processes: list[str]) -> dict[str, str]:
-    """``--pin PROCESS=CPUS`` items -> {process: 'cpu,cpu'}; ValueError with the reason for a
-    process this stack does not run, a CPU it may not use (:func:`usable_cpus`), or a bad item."""
-    usable = usable_cpus()
-    out: dict[str, str] = {}
-    for item in pins:
-        name, sep, cpus = item.partition('=')
-        name, ids = name.strip(), [c.strip() for c in cpus.split(',')]
-        if not sep or not name or not cpus.strip():
-            raise ValueError(f'--pin: PROCESS=CPUS (e.g. sim=0 or controller=0,1), got {item!r}')
-        if name not in processes:
-            raise ValueError(f'--pin: no process {name!r} in this stack (its processes: '
-                             f'{", ".join(processes)})')
-        if not all(c.isdigit() for c in ids):
-            raise ValueError(f'--pin: CPU numbers separated by commas, got {item!r}')
-        if not {int(c) for c in ids} <= usable:
-            raise ValueError(f'--pin: {item!r}: this process may use CPUs '
-                             f'{",".join(map(str, sorted(usable)))} only')
-        if name in out:
-            raise ValueError(f'--pin: {name} given twice')
-        out[name] = ','.join(str(int(c)) for c in ids)
-    return out
-
-
-def choose_defaults(a) -> list[str]:
-    """Resolve the defaults of ``up`` that depend on the machine and the plant, in ``a``: the
-    real-time priority (``--rt-priority``: DEFAULT_RT_PRIORITY in real time where permitted, 0 in
-    lockstep) and the layout (``--composed``: DEFAULT_LAYOUT of the plant; ``none`` = separate
-    processes). Returns the lines that say what was chosen and why (printed by ``up``)."""
-    notes = []
-    plant = 'sim' if a.plant == 'sim' else 'serial'
-    if getattr(a, 'composed', None) is True:      # a caller's boolean (the flag before it took a value)
-        a.composed = 'loop'
-    given = getattr(a, 'composed', None)
-    layout = given or DEFAULT_LAYOUT[plant]
-    if given is None and getattr(a, 'only', None) and layout == 'loop':
-        # a stack split across hosts (--only sim / control / recorder): the plant in a process
-        # of its own, the estimator and the controller in another
-        layout = 'control'
-    a.composed = None if layout == 'none' else layout
-    notes.append(f'layout: {LAYOUT_TEXT[layout]}' + ('' if given else f' (the default for --plant {plant}; '
-                                                      '--composed loop|control|none to change)'))
-    prio = getattr(a, 'rt_priority', None)
-    if prio is None:
-        if a.lockstep:
-            prio, why = 0, 'lockstep runs at ordinary priority'
-        else:
-            from rwpend_ros.sched import realtime_permitted
-            ok, reason = realtime_permitted(DEFAULT_RT_PRIORITY)
-            prio = DEFAULT_RT_PRIORITY if ok else 0
-            why = ('where permitted (the default; --rt-priority 0 to turn it off)' if ok else
-                   f'not permitted here ({reason}): ordinary scheduling; a busy machine may then miss '
-                   'samples (run as root or set an rtprio limit)')
-        notes.append(f'real-time priority: {prio or "none"} ({why})')
-    a.rt_priority = prio
-    return notes
-
-
-def lockstep_controller_id(ns: str) -> int:
-    """The controller id of ``up --lockstep`` in namespace ``ns``: fixed, non-zero, < 2^63."""
-    import hashlib
-    return int.from_bytes(hashlib.blake2b(ns.encode(), digest_size=8).digest(), 'big') >> 1 | 1
-
-
-def build_stack(a, prog: str) -> tuple[list[NodeSpec], list[str]]:
-    """Node specs and params files from the ``up`` arguments; raises ValueError with the reason
-    (also for a bad ``RWPEND_TRANSPORT``: refused here, before any process starts). Call
-    :func:`choose_defaults` first."""
-    from rwpend_ros.transport import transport_choice
-    transport_choice()
-    params: dict[str, dict] = {'sim': {}, 'estimator': {}, 'controller': {}, 'driver': {}}
-    rig: dict = {}
-    for f in a.params:
-        from rwpend_model.rig import read_params_file
-        if not Path(f).is_file():
-            raise ValueError(f'params file {f} does not exist')
-        read_params_file(f)   # validates the format
-    for s in a.set:
-        node, name, value = parse_assignment(s)
-        if node == 'rig':
-            rig['rig.' + name] = value
-        else:
-            params[node][name] = value
-    model_file, truth = rig_files(a)
-    check_override_types(a.params, params, rig, rig_path=model_file)
-    if a.h is not None:
-        rig['rig.sample_period'] = float(a.h)
-    from rwpend_model.rig import load_rig
-    model = load_rig(model_file, overrides=rig)   # validated now, with the reason, before anything starts
-    if a.duration is not None and not (math.isfinite(a.duration) and a.duration > 0):
-        raise ValueError(f'--duration must be > 0, got {a.duration}')
-    if a.mode:
-        params['controller']['mode'] = a.mode
-    if a.estimator:
-        params['estimator']['estimator'] = a.estimator
-    plant = a.plant
-    if plant == 'sim':
-        if a.lockstep:
-            params['sim']['lockstep'] = True
-        if a.duration:   # counted by the simulator from sample 0 (which waits for the loop)
-            params['sim']['duration'] = float(a.duration)
-        if a.theta0 is not None:
-            params['sim']['initial.theta'] = float(a.theta0)
-        if a.tap:
-            times, sizes = [], []
-            for t in a.tap:
-                try:
-                    ts, dvs = t.split(':')
-                    times.append(float(ts))
-                    sizes.append(float(dvs))
-                except ValueError:
-                    raise ValueError(f'--tap expects T:DV (e.g. 9:0.5), got {t!r}') from None
-            params['sim']['taps.times'] = times
-            params['sim']['taps.sizes'] = sizes
-        # the plant's truth (--plant-rig), then what every node gets, then --set sim.*; the model
-        # the others read goes along for the simulator's report of the difference
-        model_params = {'model_' + k: v for k, v in model.as_params().items()}
-        plant_spec = NodeSpec('sim', NODE_MODULES['sim'], {**truth, **rig, **params['sim'], **model_params},
-                              args=list(NODE_ARGS['sim']), stop_rank=3)
-    elif plant.startswith('serial:') and len(plant) > 7:
-        if a.lockstep or a.tap or a.theta0 is not None or truth:
-            raise ValueError('--lockstep, --tap, --theta0 and --plant-rig need the simulator (--plant sim); '
-                             "the rig's truth is the rig (the emulator's: ./rwpend emulate --rig FILE)")
-        params['driver']['port'] = plant[7:]
-        if a.duration:   # counted by the driver from its first command (the loop closed)
-            params['driver']['duration'] = float(a.duration)
-        plant_spec = NodeSpec('driver', NODE_MODULES['driver'], {**rig, **params['driver']}, stop_rank=3)
-    else:
-        raise ValueError(f"--plant must be 'sim' or 'serial:PORT', got {plant!r}")
-    # lockstep: sim time; the estimator and controller take it from the samples' stamps rather
-    # than /clock (rwpend_ros.simtime.SampleTime: one DDS message less per sample and node)
-    sim_time = {'use_sim_time': True, 'time_from_samples': True} if a.lockstep else {}
-    if a.lockstep:
-        # the id in every command (rwpend_ros.claim) fixed, so that a lockstep bag is the same
-        # every run, on one host or several; in real time each controller draws its own
-        params['controller'].setdefault('controller_id', lockstep_controller_id(a.ns))
-    specs = [plant_spec,
-             NodeSpec('estimator', NODE_MODULES['estimator'], {**rig, **sim_time, **params['estimator']},
-                      stop_rank=2)]
-    if not a.no_controller:
-        specs.append(NodeSpec('controller', NODE_MODULES['controller'],
-                              {**rig, **sim_time, **params['controller']}, stop_rank=1))
-    if plant == 'sim' and a.lockstep:
-        # sample 0 waits until the controller (and the recorder) listen to state: otherwise
-        # state 0 may be published before the controller matched it, and the run would start
-        # with u = 0 for a few samples -- not deterministic
-        plant_spec.params['start.state_subscribers'] = int(not a.no_controller) + int(bool(a.record))
-    if a.record:
-        if plant == 'sim':   # the simulator holds sample 0 until the recorder listens
-            plant_spec.params.update({'start.encoders_subscribers': 2, 'start.true_state_subscribers': 1})
-        else:                # the driver publishes no sample until the recorder listens
-            n = plant_spec.params.get('start.encoders_subscribers', 1)
-            plant_spec.params['start.encoders_subscribers'] = max(2, n if isinstance(n, int) else 2)
-        out = Path(a.record)
-        # (with --only and the recorder on another host, the path is that host's)
-        here = getattr(a, 'only', None) is None or 'recorder' in a.only.split(',')
-        if here and out.exists() and (not out.is_dir() or any(out.iterdir())):
-            raise ValueError(f'{out} already exists (choose a new bag directory)')
-        if here and not out.parent.exists():
-            raise ValueError(f'{out.parent} does not exist')
-        rec_args = ['record', '-o', str(out), '--all']
-        if plant == 'sim' and a.lockstep:
-            # the simulator keeps within 50 samples of the recorder: a recorder that falls
-            # behind slows the run down rather than losing messages (rwpend_loop.host)
-            plant_spec.params.setdefault('lockstep_recorder_window', LOCKSTEP_RECORDER_WINDOW)
-            rec_args += ['--progress', a.ns.rstrip('/') + '/recorder/progress']
-        if a.lockstep:
-            # log times on the simulated clock, in a deterministic order (rwpend_bag.logtime)
-            rec_args.append('--sim-time')
-        specs.append(NodeSpec('recorder', 'rwpend_bag.cli', args=rec_args, ros_args=False, stop_rank=9))
-    composed = getattr(a, 'composed', None)
-    if composed is True:      # a caller's boolean (the flag before it took a value)
-        composed = 'loop'
-    if composed not in (None, 'none', *COMPOSITIONS):
-        raise ValueError(f'--composed must be one of {", ".join(COMPOSITIONS)} or none, got {composed!r}')
-    if composed == 'loop':
-        specs = loop_layout(specs, a)
-    elif composed == 'control':
-        specs = control_layout(specs)
-    prio = getattr(a, 'rt_priority', 0) or 0
-    if not 0 <= prio <= 99:
-        raise ValueError(f'--rt-priority must be in 0..99, got {prio}')
-    if prio:
-        for s in specs:
-            # real time: the recorder below the loop (it can wait, the loop cannot); lockstep:
-            # the loop keeps both CPUs busy and waits for the recorder (its window), so the
-            # recorder runs at the loop's priority
-            below = s.name == 'recorder' and not a.lockstep
-            s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - 10) if below else prio)
-    lat = getattr(a, 'cpu_latency', None)
-    if lat is not None and lat < 0:
-        raise ValueError(f'--cpu-latency must be >= 0 (µs), got {lat}')
-    for name, ids in parse_pins(getattr(a, 'pin', None) or [], [s.name for s in specs]).items():
-        for s in specs:
-            if s.name == name:
-                s.env['RWPEND_CPUS'] = ids
-    if getattr(a, 'console', None) is not None:   # not a loop process: its own priority, no pinning
-        specs.append(console_spec(a, plant_spec))
-    files = [str(model_file), str(stack_file()), *map(str, a.params)]
-    return select_part(specs, getattr(a, 'only', None)), files
-
-
-def loop_layout(specs: list[NodeSpec], a) -> list[NodeSpec]:
-    """The plant (simulator or driver), estimator and controller of ``specs`` as nodes of one
-    loop process (rwpend_loop.host, rwpend_loop.rig): the sample path in one thread. The
-    recorder is a node of that process too: the bag is written from the bytes the nodes publish
-    (no DDS hop), by a child process of its own below the loop (rwpend_bag.procwriter)."""
-    members = [s for s in specs if s.name in ('sim', 'driver', 'estimator', 'controller')
-               and s.module == NODE_MODULES[s.name]]
-    sim = members[0]
-    args = [s.name for s in members]
-    rest = [s for s in specs if s not in members]
-    rec = next((s for s in rest if s.name == 'recorder'), None)
-    if rec is not None:
-        rest.remove(rec)
-        if 'start.state_subscribers' in sim.params:     # the recorder no longer subscribes to state
-            sim.params['start.state_subscribers'] -= 1
-        args += ['--record', str(a.record)] + (['--sim-time'] if a.lockstep else [])
-        # (the driver counts the listeners of its process itself: DriverNode.listeners_here)
-        for key in ('start.encoders_subscribers', 'start.true_state_subscribers', 'lockstep_recorder_window'):
-            if sim.name == 'sim':
-                sim.params.pop(key, None)
-    host = NodeSpec('loop', 'rwpend_loop.host', args=args, node_params={s.name: s.params for s in members},
-                    stop_rank=min(s.stop_rank for s in members))
-    return [host, *rest]
-
-
-def control_layout(specs: list[NodeSpec]) -> list[NodeSpec]:
-    """The estimator and controller of ``specs`` as the nodes of one loop process without the
-    plant (rwpend_loop.control: one loop step per ``encoders`` message); the plant and the
-    recorder stay processes of their own."""
-    members = [s for s in specs if s.name in ('estimator', 'controller') and s.module == NODE_MODULES[s.name]]
-    if not members:
-        return specs
-    first = specs.index(members[0])
-    rest = [s for s in specs if s not in members]
-    if len(members) == 1:            # --no-controller: the estimator alone, a node process of its own
-        host = NodeSpec('control', members[0].module, node_params={members[0].name: members[0].params},
-                        stop_rank=members[0].stop_rank)
-    else:
-        for plant in specs:         # the controller takes the state inside its process: not a subscriber
-            if plant.name == 'sim' and plant.params.get('start.state_subscribers', 0) > 0:
-                plant.params['start.state_subscribers'] -= 1
-        host = NodeSpec('control', 'rwpend_loop.host', args=[s.name for s in members],
-                        node_params={s.name: s.params for s in members},
-                        stop_rank=min(s.stop_rank for s in members))
-    return [*rest[:first], host, *rest[first:]]
-
-
-def select_part(specs: list[NodeSpec], only: str | None) -> list[NodeSpec]:
-    """The processes of ``--only`` (comma-separated names of ``specs``), all when None.
-    ValueError for a name the stack has not (its processes listed) or an empty list. Each
-    process keeps the parameters it has in the whole stack (the simulator waits for the
-    subscribers of the other hosts, lockstep nodes take sim time), so every host gives the
-    same ``up`` arguments."""
-    if only is None:
-        return specs
-    names = [n.strip() for n in only.split(',') if n.strip()]
-    known = [s.name for s in specs]
-    bad = [n for n in names if n not in known]
-    if not names or bad:
-        raise ValueError(f'--only: {", ".join(bad) or "no process"}: this stack runs {", ".join(known)} '
-                         '(--composed changes the processes)')
-    return [s for s in specs if s.name in names]
-
-
-def rig_files(a) -> tuple[Path, dict]:
-    """(the rig file every node reads, ``rig.*`` of the plant's own truth or {}) from ``--rig`` and
-    ``--plant-rig``: complete rig files (rwpend_model.rig.load_rig_file), ValueError otherwise."""
-    from rwpend_model.rig import load_rig_file
-    rigs = {}
-    for flag, f in (('--rig', getattr(a, 'rig', None) or rig_file()), ('--plant-rig', getattr(a, 'plant_rig', None))):
-        if f is None:
-            continue
-        if not Path(f).is_file():
-            raise ValueError(f'{flag}: no such file {f}')
+def stack_from_args(a: argparse.Namespace) -> Stack:
+    """The :class:`rwpend_bringup.stack.Stack` of the ``up`` arguments (:func:`add_stack_args`);
+    ValueError with the reason for an option the parser could not check alone."""
+    taps = []
+    for t in a.tap:
         try:
-            rigs[flag] = load_rig_file(f)
-        except ValueError as exc:
-            raise ValueError(f'{flag}: {exc}') from None
-    truth = rigs['--plant-rig'].as_params() if '--plant-rig' in rigs else {}
-    return Path(getattr(a, 'rig', None) or rig_file()), truth
-
-
-def console_spec(a, plant_spec: NodeSpec) -> NodeSpec:
-    """``up --console``: the lab console as a process of the stack, not of the loop: no pinning,
-    in real time SCHED_FIFO 40 below the loop's priority (under the recorder, above ordinary
-    programs: its e-stop must not wait for the CPU), ordinary priority in lockstep. In lockstep
-    the simulator's sample 0 waits for one more subscriber of ``state``: the console takes state
-    while a page watches the rig, so the run starts when the page is open. ValueError for a bad
-    address."""
-    from rwpend_console.console import parse_console_address
-    listen, port = parse_console_address(a.console)
-    if a.plant == 'sim' and a.lockstep:
-        plant_spec.params['start.state_subscribers'] = plant_spec.params.get('start.state_subscribers', 0) + 1
-    prio = getattr(a, 'rt_priority', 0) or 0
-    return NodeSpec('console', 'rwpend_console.console', args=['--ns', a.ns, '--listen', listen, '--port', str(port)],
-                    ros_args=False, required=a.lockstep, stop_rank=8,
-                    env={'RWPEND_RT_PRIORITY': str(max(1, prio - 40)) if prio and not a.lockstep else '0'})
+            ts, dvs = t.split(':')
+            taps.append((float(ts), float(dvs)))
+        except ValueError:
+            raise ValueError(f'--tap expects T:DV (e.g. 9:0.5), got {t!r}') from None
+    only = None
+    if a.only is not None:
+        only = tuple(n.strip() for n in a.only.split(',') if n.strip())
+    return Stack(plant=a.plant, lockstep=a.lockstep, duration=a.duration, mode=a.mode, estimator=a.estimator,
+                 record=a.record, params_files=tuple(a.params), overrides=overrides_from(a.set), ns=a.ns,
+                 rig=a.rig, plant_rig=a.plant_rig, theta0=a.theta0, taps=tuple(taps), h=a.h,
+                 controller=not a.no_controller, rt_priority=a.rt_priority, cpu_latency=a.cpu_latency,
+                 pins=parse_pins(a.pin), console=a.console, layout=a.composed, only=only)
 
 
 def up_main(argv) -> int:
@@ -547,19 +174,21 @@ def up_main(argv) -> int:
     add_stack_args(p)
     a = p.parse_args(argv)
     try:
-        notes = choose_defaults(a)
-        specs, files = build_stack(a, p.prog)
+        run = plan(stack_from_args(a))
     except ValueError as exc:
         return fail(p.prog, str(exc))
-    for n in notes:
+    for n in run.notes:
         print(f'rwpend: {n}', flush=True)
     if a.console is not None and a.lockstep:
         print('rwpend: lockstep with --console: the run starts when the console page is open (its '
               'address follows)', flush=True)
-    return run_stack(a, specs, files)
+    return run_stack(run.stack, run.specs, run.files)
 
 
-def run_stack(a, specs, files, on_started=None) -> int:
+def run_stack(stack: Stack, specs, files, on_started=None) -> int:
+    """Start ``specs`` (a :class:`rwpend_bringup.stack.Plan`'s) and wait until the stack stops;
+    the exit status of ``up`` (:func:`judge_run`)."""
+    a = stack
     launcher = Launcher(specs, namespace=a.ns, params_files=files)
     names = ', '.join(s.name for s in specs)
     from rwpend_ros.transport import discovery_range, transport_choice
@@ -567,7 +196,7 @@ def run_stack(a, specs, files, on_started=None) -> int:
           f'discovery {discovery_range()}, transport {transport_choice()})',
           flush=True)
     from rwpend_ros.sched import request_cpu_latency
-    with request_cpu_latency(getattr(a, 'cpu_latency', None)) as req:   # held until the stack has stopped
+    with request_cpu_latency(a.cpu_latency) as req:   # held until the stack has stopped
         if req.us is not None:
             print(f'rwpend: CPU wake-up latency request: {req.status}', flush=True,
                   file=sys.stdout if req.active else sys.stderr)
@@ -586,7 +215,7 @@ def run_stack(a, specs, files, on_started=None) -> int:
 WRITER_FINISH_S = 30.0
 
 
-def judge_run(a, specs, exit_codes: dict, status: int, wall_s: float, interrupted: bool = False) -> int:
+def judge_run(a: Stack, specs, exit_codes: dict, status: int, wall_s: float, interrupted: bool = False) -> int:
     """The exit status of ``up``: non-zero, with the reason, when the loop was dead at the end
     (a node's exit status :data:`rwpend_ros.health.EXIT_LOOP_DEAD`) or the bag is much shorter
     than the run (:func:`rwpend_bringup.verdict.recording_problems`). A run stopped by a signal
@@ -752,20 +381,19 @@ def demo_main(argv) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     bag = out / time.strftime('demo_%Y%m%d_%H%M%S')
-    up_args = ['--mode', 'auto', '--duration', str(a.duration), '--tap', a.tap, '--record', str(bag)]
-    if not a.realtime:
-        up_args.append('--lockstep')
-    sp = Parser(prog='rwpend demo')
-    add_stack_args(sp)
-    ua = sp.parse_args(up_args)
     try:
-        for n in choose_defaults(ua):
-            print(f'rwpend: {n}', flush=True)
-        specs, files = build_stack(ua, p.prog)
+        tap_t, tap_dv = (float(x) for x in a.tap.split(':'))
+    except ValueError:
+        return fail(p.prog, f'--tap expects T:DV (e.g. 11:0.6), got {a.tap!r}')
+    try:
+        run = plan(Stack(mode='auto', duration=a.duration, taps=((tap_t, tap_dv),), record=str(bag),
+                         lockstep=not a.realtime))
     except ValueError as exc:
         return fail(p.prog, str(exc))
+    for n in run.notes:
+        print(f'rwpend: {n}', flush=True)
     t0 = time.monotonic()
-    status = run_stack(ua, specs, files)
+    status = run_stack(run.stack, run.specs, run.files)
     wall = time.monotonic() - t0
     if status != 0:
         return fail(p.prog, 'the stack did not run cleanly (see above)', 1)

@@ -5,18 +5,29 @@ import os
 
 import pytest
 
-from rwpend_bringup import cli
-from rwpend_bringup.cli import Parser, add_stack_args, build_stack, choose_defaults
+from rwpend_bringup import stack
+from rwpend_bringup.cli import Parser, add_stack_args, stack_from_args
+from rwpend_bringup.stack import Stack, plan
 
-#: a bag path that does not exist (build_stack refuses one that does)
+#: a bag path that does not exist (plan refuses one that does)
 NO_BAG = '/tmp/rwpend-test-no-such-bag'
 
 
-def specs_of(*argv):
+def plan_of(*argv):
     p = Parser(prog='rwpend up')
     add_stack_args(p)
-    specs, _ = build_stack(p.parse_args(list(argv)), p.prog)
-    return {s.name: s for s in specs}
+    return plan(stack_from_args(p.parse_args(list(argv))))
+
+
+def specs_of(*argv):
+    """The processes of ``up ARGV``, separate (``--composed none``) and at ordinary priority
+    unless ARGV says otherwise."""
+    argv = list(argv)
+    if '--composed' not in argv:
+        argv += ['--composed', 'none']
+    if '--rt-priority' not in argv:
+        argv += ['--rt-priority', '0']
+    return {s.name: s for s in plan_of(*argv).specs}
 
 
 def test_rt_priority_and_pins_go_to_the_environment():
@@ -113,31 +124,15 @@ def test_pin_twice_refused():
 
 
 def test_pin_refuses_a_cpu_this_process_may_not_use(monkeypatch):
-    from rwpend_bringup import cli
-    monkeypatch.setattr(cli, 'usable_cpus', lambda: {2, 3})      # a container's cgroup
+    monkeypatch.setattr(stack, 'usable_cpus', lambda: {2, 3})      # a container's cgroup
     with pytest.raises(ValueError, match='may use CPUs 2,3 only'):
         specs_of('--pin', 'sim=0')
     assert specs_of('--pin', 'sim=3')['sim'].env['RWPEND_CPUS'] == '3'
 
 
-def test_bench_pins_of_the_real_time_runs(monkeypatch):
-    from rwpend_bringup import bench, cli
-    monkeypatch.setattr(cli, 'usable_cpus', lambda: {0, 1})
-    assert bench.realtime_pins(None, ['separate', 'control']) == {'separate': ('sim=0', 'estimator=0', 'controller=1')}
-    assert bench.realtime_pins(['none'], ['separate']) == {}
-    assert bench.realtime_pins(['sim=1', 'loop=0'], ['separate', 'control', 'loop']) == {
-        'separate': ('sim=1',), 'control': ('sim=1',), 'loop': ('loop=0',)}
-    with pytest.raises(ValueError, match="no process 'loop'"):
-        bench.realtime_pins(['loop=0'], ['separate'])
-    monkeypatch.setattr(cli, 'usable_cpus', lambda: {0})          # one CPU: nothing pinned
-    assert bench.realtime_pins(None, ['separate']) == {}
-    monkeypatch.setattr(cli, 'usable_cpus', lambda: {2, 3})       # not CPUs 0 and 1: nothing either
-    assert bench.realtime_pins(None, ['separate']) == {}
-
-
 def test_set_and_params_keep_the_type_of_what_they_override(tmp_path):
     """rcl keeps the earlier value when a later params file gives another type: refused here."""
-    from rwpend_bringup.cli import check_override_types
+    from rwpend_bringup.stack import check_override_types
     check_override_types([], {'sim': {'lockstep_timeout': 2, 'start.delay': 'x'}}, {'rig.g': 10})
     for params, rig, text in (({'sim': {'lockstep_timeout': 'soon'}}, {}, '--set sim.lockstep_timeout:'),
                               ({'sim': {'publish_true_state': 1}}, {}, 'must be true or false'),
@@ -172,9 +167,8 @@ def _heavy(tmp_path, m_p=0.25):
 
 def test_plant_rig_gives_the_simulator_its_own_truth(tmp_path):
     heavy = _heavy(tmp_path)
-    p = Parser(prog='rwpend up')
-    add_stack_args(p)
-    specs, files = build_stack(p.parse_args(['--plant-rig', str(heavy), '--set', 'rig.g=9.91']), p.prog)
+    run = plan(Stack(plant_rig=str(heavy), overrides={'rig': {'g': 9.91}}, layout='none'))
+    specs, files = run.specs, run.files
     s = {x.name: x for x in specs}
     assert s['sim'].params['rig.m_p'] == 0.25 and s['sim'].params['model_rig.m_p'] == 0.2164
     assert s['sim'].params['rig.g'] == s['sim'].params['model_rig.g'] == 9.91, '--set rig.* goes to every node'
@@ -183,9 +177,8 @@ def test_plant_rig_gives_the_simulator_its_own_truth(tmp_path):
 
 def test_rig_file_is_what_every_node_reads(tmp_path):
     heavy = _heavy(tmp_path)
-    p = Parser(prog='rwpend up')
-    add_stack_args(p)
-    specs, files = build_stack(p.parse_args(['--rig', str(heavy)]), p.prog)
+    run = plan(Stack(rig=str(heavy), layout='none'))
+    specs, files = run.specs, run.files
     assert files[0] == str(heavy)
     assert {x.name: x for x in specs}['sim'].params['model_rig.m_p'] == 0.25
 
@@ -203,19 +196,15 @@ def test_bad_rig_files_refused(tmp_path, args, match):
 
 
 def defaults_of(*argv):
-    p = Parser(prog='rwpend up')
-    add_stack_args(p)
-    a = p.parse_args(list(argv))
-    notes = choose_defaults(a)
-    specs, _ = build_stack(a, p.prog)
-    return a, {s.name: s for s in specs}, notes
+    run = plan_of(*argv)
+    return run.stack, {s.name: s for s in run.specs}, run.notes
 
 
 def test_defaults_real_time_priority_where_permitted_and_the_layout_of_the_plant(monkeypatch):
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
     a, s, notes = defaults_of('--record', NO_BAG)
-    assert a.rt_priority == cli.DEFAULT_RT_PRIORITY and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
-    assert a.composed == cli.DEFAULT_LAYOUT['sim'] == 'loop' and 'loop' in s
+    assert a.rt_priority == stack.DEFAULT_RT_PRIORITY and s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
+    assert a.layout == stack.DEFAULT_LAYOUT['sim'] == 'loop' and 'loop' in s
     assert any('layout' in n for n in notes) and any('real-time priority: 50' in n for n in notes)
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (False, 'Operation not permitted'))
     a, s, notes = defaults_of()
@@ -228,12 +217,12 @@ def test_defaults_lockstep_at_ordinary_priority_explicit_choices_kept(monkeypatc
     a, s, _ = defaults_of('--lockstep')
     assert a.rt_priority == 0
     a, s, notes = defaults_of('--rt-priority', '0', '--composed', 'none')
-    assert a.rt_priority == 0 and a.composed is None and {'sim', 'estimator', 'controller'} <= set(s)
+    assert a.rt_priority == 0 and a.layout == 'none' and {'sim', 'estimator', 'controller'} <= set(s)
     assert not any('real-time priority' in n for n in notes)
     a, s, _ = defaults_of('--composed')
-    assert a.composed == 'loop' and list(s) == ['loop']
+    assert a.layout == 'loop' and list(s) == ['loop']
     a, s, _ = defaults_of('--plant', 'serial:/dev/null')
-    assert a.composed == 'loop' and list(s) == ['loop'] and s['loop'].args == ['driver', 'estimator', 'controller']
+    assert a.layout == 'loop' and list(s) == ['loop'] and s['loop'].args == ['driver', 'estimator', 'controller']
 
 
 def test_realtime_permitted_answers_without_changing_this_thread():
@@ -289,7 +278,7 @@ def test_the_loop_layout_is_the_default_on_the_simulator(monkeypatch, tmp_path):
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
     bag = str(tmp_path / 'bag')
     a, s, notes = defaults_of('--lockstep', '--record', bag, '--mode', 'auto')
-    assert list(s) == ['loop'] and a.composed == 'loop'
+    assert list(s) == ['loop'] and a.layout == 'loop'
     assert s['loop'].module == 'rwpend_loop.host'
     assert s['loop'].args == ['sim', 'estimator', 'controller', '--record', bag, '--sim-time']
     sim = s['loop'].node_params['sim']
@@ -312,11 +301,11 @@ def test_the_loop_layout_is_the_default_on_the_rig(monkeypatch, tmp_path):
     monkeypatch.setattr('rwpend_ros.sched.realtime_permitted', lambda prio: (True, ''))
     bag = str(tmp_path / 'bag')
     a, s, notes = defaults_of('--plant', 'serial:/dev/null', '--record', bag)
-    assert a.composed == 'loop' and list(s) == ['loop'] and s['loop'].module == 'rwpend_loop.host'
+    assert a.layout == 'loop' and list(s) == ['loop'] and s['loop'].module == 'rwpend_loop.host'
     assert s['loop'].args == ['driver', 'estimator', 'controller', '--record', bag]
     assert s['loop'].node_params['driver']['start.encoders_subscribers'] == 2
     assert s['loop'].node_params['driver']['port'] == '/dev/null'
     assert s['loop'].env['RWPEND_RT_PRIORITY'] == '50'
     # split across hosts, and the other layouts on request
     assert set(defaults_of('--plant', 'serial:/dev/null', '--only', 'driver')[1]) == {'driver'}
-    assert defaults_of('--plant', 'serial:/dev/null', '--composed', 'control')[0].composed == 'control'
+    assert defaults_of('--plant', 'serial:/dev/null', '--composed', 'control')[0].layout == 'control'

@@ -1,14 +1,21 @@
 """``./rwpend up --console``: the console as a process of the stack (no process started)."""
 import pytest
 
-from rwpend_bringup.cli import Parser, add_stack_args, build_stack
+from rwpend_bringup.cli import Parser, add_stack_args, stack_from_args
+from rwpend_bringup.stack import plan
 
 
 def specs_of(*argv):
+    """The processes of ``up ARGV``, separate (``--composed none``) and at ordinary priority
+    unless ARGV says otherwise."""
+    argv = list(argv)
+    if '--composed' not in argv:
+        argv += ['--composed', 'none']
+    if '--rt-priority' not in argv:
+        argv += ['--rt-priority', '0']
     p = Parser(prog='rwpend up')
     add_stack_args(p)
-    specs, _ = build_stack(p.parse_args(list(argv)), p.prog)
-    return {s.name: s for s in specs}
+    return {s.name: s for s in plan(stack_from_args(p.parse_args(argv))).specs}
 
 
 def test_the_console_is_a_process_of_the_stack_not_of_the_loop():

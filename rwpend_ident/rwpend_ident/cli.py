@@ -59,7 +59,7 @@ def rigs(a):
 def check_inputs(a) -> None:
     """IdentError for what can be judged before anything runs (so a refused identification
     leaves nothing behind): the --set values, the bags of --from, the rig's port."""
-    from rwpend_bringup.cli import parse_assignment
+    from rwpend_bringup.stack import parse_assignment
     for text in a.set:
         try:
             parse_assignment(text)
@@ -95,8 +95,9 @@ def get_data(a, runs, base, base_file: Path, out: Path, log):
     if a.plant != 'sim':
         from . import rigpath
         return rigpath.run_plan(runs, base, out, a, log)
-    extra = ['--rig', str(base_file)] + (['--plant-rig', str(a.plant_rig)] if a.plant_rig else [])
-    opts = session.Options(stack_args=tuple(extra), sets=tuple(a.set), composed=a.composed)
+    from rwpend_lab.runner import base_stack
+    opts = session.Options(stack=base_stack(a.set, a.composed, error=IdentError, rig=str(base_file),
+                                            plant_rig=str(a.plant_rig) if a.plant_rig else None))
     return session.run_plan(runs, base, out, opts, log), opts.records
 
 

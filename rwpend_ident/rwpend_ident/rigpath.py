@@ -42,9 +42,8 @@ def run_plan(runs, rig, out: Path, a, log=print) -> tuple[dict, list]:
     first = next((r.name for r in runs if r.name.startswith('pulse')), None)
     for i, run in enumerate(runs, 1):
         log(f'  run {i}/{len(runs)}: {run.name} -- {run.title}')
-        extra = ['--rig', str(base_file)] + (['--composed', a.composed] if a.composed else [])
-        r = record_run(rig_run(run), rig, out, a.plant, a.set, extra=extra, log=log, prog='rwpend identify',
-                       error=IdentError)
+        stack = runner.base_stack(a.set, a.composed, error=IdentError, plant=a.plant, rig=str(base_file))
+        r = record_run(rig_run(run), rig, out, stack, log=log, prog='rwpend identify', error=IdentError)
         data[run.name] = load_run(r.bag, rig.sample_period)
         records.append({**runner.run_record(run, r.bag, r.wall_s),
                         **run_facts(r, a.plant, r.steps.origin, rig.sample_period)})

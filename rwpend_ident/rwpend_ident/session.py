@@ -22,12 +22,10 @@ from .records import IdentError, check_directions, commands, first_input, refuse
 
 @dataclass(frozen=True)
 class Options:
-    """How to run: the stack's extra ``up`` arguments (``--rig``, ``--plant-rig``), ``--set`` values,
-    the composition."""
+    """How to run: the stack of every run (:func:`rwpend_lab.runner.base_stack`: ``--rig``,
+    ``--plant-rig``, the ``--set`` values, the layout), and the run records as they come."""
 
-    stack_args: tuple = ()
-    sets: tuple = ()
-    composed: str | None = None
+    stack: object = None
     records: list = field(default_factory=list)
 
 
@@ -66,7 +64,7 @@ def run_once_more_if_stalled(run, out: Path, options: Options, log) -> float:
     stalled: on a loaded machine a DDS process can stop for minutes) is run once more, its bag and log kept aside as
     ``<run>.stalled``; IdentError when that fails too."""
     def once() -> float:
-        return runner.run_stack(run, out, options.sets, options.composed, log, extra=options.stack_args)
+        return runner.run_stack(run, out, options.stack, log)
     try:
         return once()
     except LabError as exc:

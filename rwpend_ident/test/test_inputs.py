@@ -123,7 +123,7 @@ def test_only_a_stalled_run_is_run_once_more(tmp_path, monkeypatch, reason, call
     from rwpend_lab.experiment import LabError
     seen = []
 
-    def run_stack(run, out, sets, composed, log, extra=()):
+    def run_stack(run, out, stack, log=None):
         seen.append(run.name)
         (out / 'runs' / run.name).mkdir(parents=True, exist_ok=True)
         if len(seen) == 2:

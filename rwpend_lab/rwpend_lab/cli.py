@@ -56,7 +56,7 @@ def parse_numbers(text: str) -> list[int]:
 
 def lab_rig(sets):
     """The rig the stack will run with (rig.yaml + the --set rig.* overrides); LabError if bad."""
-    from rwpend_bringup.cli import parse_assignment
+    from rwpend_bringup.stack import parse_assignment
     from rwpend_model.rig import load_rig
     overrides = {}
     for s in sets:
@@ -100,7 +100,7 @@ def run_one(n: int, a, log=print) -> dict:
         from . import rigrun
         data, records = rigrun.run_all(exp, rig, runs, out, options, log=log)
     else:
-        data, records = runner.run_all(exp, rig, runs, out, a.set, a.composed, log=log)
+        data, records = runner.run_all(exp, rig, runs, out, runner.base_stack(a.set, a.composed), log=log)
     analysis = exp.analyze(rig, data)
     meta = {'plant': a.plant, 'rig': rig.as_params(), 'options': {'law': options.law, 'set': list(a.set)}}
     res = report.write(out, exp, analysis, records, meta)

@@ -236,16 +236,16 @@ def port_problem(plant: str) -> str | None:
     return None
 
 
-def record_run(run: Run, rig, out: Path, plant: str, sets=(), extra=(), log=print, prog: str = 'rwpend lab',
+def record_run(run: Run, rig, out: Path, stack, log=print, prog: str = 'rwpend lab',
                error=LabError) -> RigRun:
-    """One run on the rig, recorded to ``out/runs/<name>``: the stack of ``up --plant PORT
-    --record`` (``extra``: more ``up`` arguments, e.g. ``--rig FILE``), the steps prompted and
-    detected, the controller armed when they say, the stack stopped when the run is over.
-    ``error`` (an exception class) carries the reason when it cannot be done. Shared by the lab
-    and ``./rwpend identify --plant serial:``."""
-    from rwpend_bringup import cli
+    """One run on the rig, recorded to ``out/runs/<name>``: ``stack`` (a
+    :class:`rwpend_bringup.stack.Stack` with a serial plant, e.g. :func:`rwpend_lab.runner.base_stack`)
+    with the recorder, the steps prompted and detected, the controller armed when they say, the
+    stack stopped when the run is over. ``error`` (an exception class) carries the reason when it
+    cannot be done. Shared by the lab and ``./rwpend identify --plant serial:``."""
     from rwpend_bringup.launch import Launcher
-    why = port_problem(plant)
+    from rwpend_bringup.stack import plan
+    why = port_problem(stack.plant)
     if why:
         raise error(why)
     runs_dir = out / 'runs'
@@ -255,24 +255,21 @@ def record_run(run: Run, rig, out: Path, plant: str, sets=(), extra=(), log=prin
         raise error(f'{bag} exists already (choose a new --out directory)')
     armed = run.arm_after > 0 and run.mode != 'off'
     pfile = runner.params_file(replace(run, mode='off') if armed else run,
-                               runs_dir / f'{run.name}.params.yaml', plant)
+                               runs_dir / f'{run.name}.params.yaml', stack.plant)
     # the driver publishes once the estimator, the recorder and the lab's monitor listen
-    args = ['--plant', plant, '--record', str(bag), '--params', str(pfile),
-            '--set', 'driver.start.encoders_subscribers=3', *extra]
-    for s in sets:
-        args += ['--set', s]
-    p = cli.Parser(prog=prog)
-    cli.add_stack_args(p)
-    ua = p.parse_args(args)
-    for note in cli.choose_defaults(ua):
-        log(f'      {note}')
+    overrides = {**stack.overrides,
+                 'driver': {'start.encoders_subscribers': 3, **stack.overrides.get('driver', {})}}
     try:
-        specs, files = cli.build_stack(ua, prog)
+        p = plan(replace(stack, record=str(bag), params_files=(*stack.params_files, str(pfile)),
+                         overrides=overrides))
         steps = StepSequence(rig, run.prompts, run.arm_after if armed else 0, run.duration,
                              timeout_s=PROMPT_TIMEOUT_S)
     except ValueError as exc:
         raise error(str(exc)) from None
-    monitor = Monitor(steps, ua.ns, run.mode, log, ua.rt_priority or 0, recorder_in_loop=ua.composed == 'loop')
+    for note in p.notes:
+        log(f'      {note}')
+    ua = p.stack
+    monitor = Monitor(steps, ua.ns, run.mode, log, ua.rt_priority or 0, recorder_in_loop=ua.layout == 'loop')
     try:
         monitor.start()
     except LabError as exc:
@@ -282,7 +279,7 @@ def record_run(run: Run, rig, out: Path, plant: str, sets=(), extra=(), log=prin
     log_file = runs_dir / f'{run.name}.log'
     try:
         with open(log_file, 'w') as fh:
-            launcher = Launcher(specs, namespace=ua.ns, params_files=files, out=fh)
+            launcher = Launcher(p.specs, namespace=ua.ns, params_files=p.files, out=fh)
             status = launcher.run(bound, until=monitor.finished)
     finally:
         monitor.close()
@@ -298,7 +295,7 @@ def record_run(run: Run, rig, out: Path, plant: str, sets=(), extra=(), log=prin
 
 def run_one(exp, run: Run, rig, out: Path, options, log) -> tuple[object, dict]:
     """One run of an experiment on the rig; (RunData cut to what the simulator run holds, its record)."""
-    r = record_run(run, rig, out, options.plant, options.sets, log=log)
+    r = record_run(run, rig, out, runner.base_stack(options.sets, plant=options.plant), log=log)
     d = load_run(r.bag, rig.sample_period)
     origin = r.steps.origin
     if r.armed and run.arm_after == len(run.prompts):

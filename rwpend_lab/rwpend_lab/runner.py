@@ -1,9 +1,9 @@
 """Runs an experiment through the real stack: the nodes, topics and parameters of ``./rwpend up``.
 
-For every :class:`Run` the runner writes the run's parameters as a ROS 2 params file, builds the
-stack with rwpend_bringup's ``build_stack`` (the arguments of ``up --lockstep --record BAG
---duration S --params FILE [--set ...]``) and starts it with the launcher; the nodes' output goes
-to ``DIR/runs/<run>.log``.  On the simulator the manual steps are done by the simulator (initial
+For every :class:`Run` the runner writes the run's parameters as a ROS 2 params file, describes
+the stack (:class:`rwpend_bringup.stack.Stack`: that of ``up --lockstep --record BAG --duration S
+--params FILE [--set ...]``), plans it and starts it with the launcher; the nodes' output goes to
+``DIR/runs/<run>.log``.  On the simulator the manual steps are done by the simulator (initial
 state, taps, torques); the rig path (``--plant serial:PORT``) is :mod:`rwpend_lab.rigrun`.
 """
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from .data import load_run
@@ -36,41 +37,38 @@ def params_file(run: Run, path: Path, plant: str) -> Path:
     return path
 
 
-def stack_args(run: Run, bag: Path, pfile: Path, sets, composed: str | None, extra=()) -> list[str]:
-    """The ``up`` arguments of a run (``extra``: more of them, e.g. ``--rig FILE --plant-rig FILE``)."""
-    args = ['--lockstep', '--duration', repr(float(run.duration)), '--record', str(bag), '--params', str(pfile),
-            *extra]
-    for s in sets:
-        args += ['--set', s]
-    if composed:
-        args += ['--composed', composed]
-    return args
+def base_stack(sets=(), layout: str | None = None, error=LabError, **fields):
+    """The stack the runs of a study share (:class:`rwpend_bringup.stack.Stack`): ``up``'s, with
+    the ``--set NODE.PARAM=VALUE`` overrides ``sets``, the layout and more fields (``rig``,
+    ``plant_rig``, ``plant``...); ``error`` with the reason for a bad ``--set``."""
+    from rwpend_bringup.stack import Stack, overrides_from
+    try:
+        return Stack(overrides=overrides_from(sets), layout=layout, **fields)
+    except ValueError as exc:
+        raise error(f'--set: {exc}') from None
 
 
-def run_stack(run: Run, out: Path, sets, composed: str | None = None, log=None, extra=()) -> float:
-    """One run of the stack in lockstep on the simulator; returns the wall time (s)."""
-    from rwpend_bringup import cli
+def run_stack(run: Run, out: Path, stack, log=None):
+    """One run of ``stack`` (:func:`base_stack`) in lockstep on the simulator, recorded to
+    ``out/runs/<run>``; returns the wall time (s)."""
     from rwpend_bringup.launch import Launcher
+    from rwpend_bringup.stack import plan
     runs_dir = out / 'runs'
     runs_dir.mkdir(parents=True, exist_ok=True)
     bag = runs_dir / run.name
     if bag.exists():
         raise LabError(f'{bag} exists already (choose a new --out directory)')
     pfile = params_file(run, runs_dir / f'{run.name}.params.yaml', 'sim')
-    p = cli.Parser(prog='rwpend lab')
-    cli.add_stack_args(p)
-    a = p.parse_args(stack_args(run, bag, pfile, sets, composed, extra))
     try:
-        cli.choose_defaults(a)          # the layout of up (the loop on the simulator)
-        specs, files = cli.build_stack(a, 'rwpend lab')
+        p = plan(replace(stack, lockstep=True, duration=float(run.duration), record=str(bag),
+                         params_files=(*stack.params_files, str(pfile))))
     except ValueError as exc:
         raise LabError(str(exc)) from None
     t0 = time.monotonic()
     with open(runs_dir / f'{run.name}.log', 'w') as fh:
-        launcher = Launcher(specs, namespace=a.ns, params_files=files, out=fh)
+        launcher = Launcher(p.specs, namespace=p.stack.ns, params_files=p.files, out=fh)
         status = launcher.run(120.0 + 20.0 * run.duration, until=_ticker(log, t0))
-    plant = 'loop' if a.composed == 'loop' else 'sim'    # the process the simulator runs in
-    if status != 0 or launcher.reason != f'exited:{plant}':
+    if status != 0 or launcher.reason != f'exited:{p.stack.loop_process}':
         raise LabError(f'run {run.name}: the stack did not run to the end ({launcher.reason}); '
                        f'see {runs_dir / (run.name + ".log")}')
     return time.monotonic() - t0
@@ -89,14 +87,15 @@ def _ticker(log, t0: float, every: float = 15.0):
     return tick
 
 
-def run_all(exp, rig, runs: list[Run], out: Path, sets, composed=None, log=print) -> tuple[dict, list[dict]]:
-    """Every run of an experiment; (data by run name, run records for results.json)."""
+def run_all(exp, rig, runs: list[Run], out: Path, stack, log=print) -> tuple[dict, list[dict]]:
+    """Every run of an experiment with ``stack`` (:func:`base_stack`); (data by run name, run
+    records for results.json)."""
     data, records = {}, []
     total = sum(r.duration for r in runs)
     for i, run in enumerate(runs, 1):
         log(f'  run {i}/{len(runs)}: {run.name} -- {run.title} ({run.duration:g} s simulated; '
             f'{total:g} s in all)')
-        wall = run_stack(run, out, sets, composed, log)
+        wall = run_stack(run, out, stack, log)
         data[run.name] = load_run(out / 'runs' / run.name, rig.sample_period)
         log(f'      done: {run.duration:g} s simulated in {wall:.1f} s wall')
         records.append(run_record(run, out / 'runs' / run.name, wall))

@@ -22,8 +22,7 @@ ID = 0x1234
 
 @pytest.fixture(scope='module')
 def rig():
-    from rwpend_bringup.cli import rig_file
-    return load_rig(rig_file())
+    return load_rig()
 
 
 def make_loop(rig, mode='auto', controller=True, theta=0.0, **core_kwargs):

@@ -62,15 +62,10 @@ class Defaults:
     controller: dict
 
 
-def stack_file():
-    from pathlib import Path
-    import rwpend_bringup
-    return Path(rwpend_bringup.__file__).resolve().parent / 'config' / 'stack.yaml'
-
-
 @lru_cache(maxsize=1)
 def defaults() -> Defaults:
     """rig.yaml and stack.yaml as ./rwpend up gives them to the nodes."""
+    from rwpend_bringup.stack import stack_file
     f = stack_file()
     sim = {'command_timeout_samples': 3, 'claim_timeout_samples': 500, 'lockstep_timeout': 0.5,
            'loop_dead_after': 2.0}
@@ -83,8 +78,8 @@ def defaults() -> Defaults:
 
 
 def lockstep_controller_id(ns: str = NAMESPACE) -> int:
-    """The controller id of ``./rwpend up --lockstep`` (rwpend_bringup.cli.lockstep_controller_id)."""
-    from rwpend_bringup.cli import lockstep_controller_id as cid
+    """The controller id of ``./rwpend up --lockstep`` (rwpend_bringup.stack.lockstep_controller_id)."""
+    from rwpend_bringup.stack import lockstep_controller_id as cid
     return cid(ns)
 
 
