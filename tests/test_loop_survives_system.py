@@ -2,7 +2,7 @@
 
 * ``./rwpend up`` fails, with the reason, when the loop was dead at the end of the run: the
   simulator saw no fresh command for seconds (here: the estimator stopped for good);
-* the soak's short version (``./rwpend soak --short``, rwpend_bringup.soak): a real-time run in
+* the soak's short version (``./rwpend soak --short``, rwpend_bench.soak): a real-time run in
   the default layout on a host loaded with a busy loop per CPU, the estimator stopped for 0.5 s
   while balancing -- judged from the bag with an independent reader (rwpend_bag.judge): alive at
   the end, the motor never driven by a stale command, no stream latched, every gap reported;
@@ -27,7 +27,7 @@ import pytest
 from rwpend_bag.judge import judge, read_run
 from rwpend_bringup.verdict import EXIT_SHORT_BAG
 
-from rwpend_bringup import soak
+from rwpend_bench import soak
 
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')

@@ -1,7 +1,7 @@
 """The lab network, tested (issue 22): the stack split across hosts of a lab subnet, many rigs
 on one network, one controller per rig -- with test hosts in network namespaces joined by a
-switch (rwpend_bringup.netlab), ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``, each host running
-``./rwpend up`` with the same arguments and its own ``--only`` (rwpend_bringup.netrun).
+switch (rwpend_bench.netlab), ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``, each host running
+``./rwpend up`` with the same arguments and its own ``--only`` (rwpend_bench.netrun).
 
 Skipped, with the reason, where the namespaces cannot be made (not root). Nothing here asserts
 timing: the latency and late fractions across the link are printed (``pytest -s``; the figures
@@ -22,7 +22,7 @@ import pytest
 
 from rwpend_bag.judge import judge, read_run
 from rwpend_bag.reader import read_bag
-from rwpend_bringup.netrun import SplitRun
+from rwpend_bench.netrun import SplitRun
 from rwpend_ros import wire
 
 pytestmark = pytest.mark.network
@@ -79,7 +79,7 @@ def test_lockstep_split_across_three_hosts_gives_the_bag_of_one_host(tmp_path, r
 def test_realtime_split_swings_up_and_balances(tmp_path, netlab, lab_env):
     """Real time across the link: it swings up and balances; the motor is never driven by a
     stale command; every gap of the bag is in its report. Latency and late fractions printed."""
-    from rwpend_bringup.bench import bag_metrics
+    from rwpend_bench.bench import bag_metrics
     _, _, _, placement = split_three(netlab)
     bag = tmp_path / 'rt'
     run = SplitRun(netlab, lab_env, ['--mode', 'auto', '--duration', '20', '--ns', '/rig1',
@@ -211,7 +211,7 @@ def test_delay_and_loss_are_reported_and_never_unsafe(tmp_path, netlab, lab_env)
     0 ms, 1 ms, 1 % loss, 5 ms each way, then 0 ms again. Printed per stretch: late share,
     share at zero by the timeout, share upright. Asserted: no sample driven by a stale
     command, ever (5 ms each way makes every command 10+ samples old: the plant refuses them)."""
-    from rwpend_bringup.netlab import ensure_nft
+    from rwpend_bench.netlab import ensure_nft
     reason = ensure_nft()
     if reason is not None:
         pytest.skip(f'no packet loss without nftables: {reason}')
@@ -254,7 +254,7 @@ def start_rigs(netlab, tmp_path, rigs, duration: float = 300.0):
     """Each rig (namespace, domain id, initial theta): its simulator on host A, its estimator +
     controller on B, its recorder on C, until stopped (``duration`` is a bound). Returns
     (hosts, {ns: (run, env, bag)})."""
-    from rwpend_bringup.netrun import lab_env
+    from rwpend_bench.netrun import lab_env
     a, b, c, placement = split_three(netlab)
     out = {}
     for ns, domain, theta0 in rigs:
@@ -375,7 +375,7 @@ def test_two_controllers_on_one_rig_across_hosts(tmp_path, netlab, lab_env):
     namespace): the plant obeys the controller that claimed the rig, refuses and counts the
     other's commands and names it on /diagnostics; when the holder stops (it releases the rig,
     or goes silent) the other takes over; ./rwpend estop is accepted from any host."""
-    from rwpend_bringup.soak import find_process
+    from rwpend_bench.soak import find_process
     # each controller on a host of its own (a controller that stops ends its host's ./rwpend up,
     # and with it whatever else that host ran: the estimator or the recorder)
     a, b, c, d = (netlab.add_host(n) for n in ('a', 'b', 'c', 'd'))

@@ -13,7 +13,7 @@ ROOT=$PWD
 VENV=$ROOT/.venv
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
-PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_loop rwpend_bringup rwpend_lab rwpend_ident rwpend_console rwpend_sweep"
+PYPKGS="rwpend_model rwpend_ros rwpend_sim rwpend_estimation rwpend_control rwpend_driver rwpend_bag rwpend_loop rwpend_bringup rwpend_lab rwpend_ident rwpend_console rwpend_sweep rwpend_bench"
 
 # --firmware (make firmware): only the cross compiler of the rig's reference firmware (firmware/),
 # Debian's gcc-arm-none-eabi and its newlib. Nothing else of the set-up below.

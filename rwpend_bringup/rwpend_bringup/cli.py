@@ -634,14 +634,14 @@ def emulate_main(argv) -> int:
 
 def bench_main(argv) -> int:
     try:
-        from .bench import main
+        from rwpend_bench.bench import main
     except ImportError:
         return fail('rwpend bench', 'the benchmark is not available in this version', 1)
     return main(argv)
 
 
 def soak_main(argv) -> int:
-    from .soak import main
+    from rwpend_bench.soak import main
     return main(argv)
 
 

@@ -43,7 +43,7 @@ def test_dump_load_stages(tmp_path):
 
 
 def test_bench_trace_metrics(tmp_path):
-    from rwpend_bringup.bench import trace_metrics
+    from rwpend_bench.bench import trace_metrics
     _write_run(tmp_path, samples=6, late=(3,), lost=(4,))
     m = trace_metrics(tmp_path)
     # samples 0..4 have a successor; 3 is late, 4 lost

@@ -7,8 +7,8 @@ import subprocess
 
 import pytest
 
-from rwpend_bringup.netlab import ensure_nft
-from rwpend_bringup.soak import drop_rule
+from rwpend_bench.netlab import ensure_nft
+from rwpend_bench.soak import drop_rule
 
 
 @pytest.mark.parametrize('share', [0.01, 0.1, 0.5])

@@ -68,7 +68,7 @@ from pathlib import Path
 
 from rwpend_ros.transport import transport_choice
 
-from .launch import Launcher
+from rwpend_bringup.launch import Launcher
 
 DEFAULT_PERIODS = (0.001, 0.0005)
 #: bench layouts -> ./rwpend up arguments
@@ -261,7 +261,7 @@ def realtime_pins(pin: list[str] | None, layouts) -> dict[str, tuple[str, ...]]:
     """The ``--pin`` items of each layout's real-time runs: the defaults (:data:`DEFAULT_PINS`,
     when CPUs 0 and 1 are usable) when ``pin`` is None, nothing for ``['none']``; else those items whose
     process the layout runs. ValueError for a process no layout of the run has, or a bad item."""
-    from .cli import parse_pins, usable_cpus
+    from rwpend_bringup.cli import parse_pins, usable_cpus
     if pin is None:
         return dict(DEFAULT_PINS) if {0, 1} <= usable_cpus() else {}
     if [v.strip().lower() for v in pin] == ['none']:
@@ -279,7 +279,7 @@ def realtime_pins(pin: list[str] | None, layouts) -> dict[str, tuple[str, ...]]:
 
 def _stack(up_args: list[str]):
     """(parsed args, specs, params files) of ``./rwpend up UP_ARGS`` (cli.build_stack)."""
-    from .cli import Parser, add_stack_args, build_stack
+    from rwpend_bringup.cli import Parser, add_stack_args, build_stack
     p = Parser(prog='rwpend bench')
     add_stack_args(p)
     a = p.parse_args(up_args)
@@ -885,7 +885,7 @@ def _stages_text(st) -> str:
 
 # ------------------------------------------------------------------ main
 def _parser() -> argparse.ArgumentParser:
-    from .cli import Parser
+    from rwpend_bringup.cli import Parser
     p = Parser(prog='rwpend bench', description='Real-time (1 kHz and 2 kHz), lockstep and bag '
                'decode benchmark of the full stack; prints a summary and writes OUTDIR/bench.json. '
                'Timing figures depend on the load of the machine: the JSON records the load average '
@@ -943,7 +943,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     p = _parser()
     a = p.parse_args(sys.argv[1:] if argv is None else list(argv))
-    from .cli import ROOT
+    from rwpend_bringup.cli import ROOT
     duration = a.duration if a.duration is not None else (8.0 if a.quick else 60.0)
     ls_dur = a.lockstep_duration if a.lockstep_duration is not None else (4.0 if a.quick else 12.0)
     if not (duration > 0 and ls_dur > 0):

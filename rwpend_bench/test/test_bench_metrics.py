@@ -1,7 +1,7 @@
 """Pure helpers of the benchmark (no process started)."""
 from __future__ import annotations
 
-from rwpend_bringup.bench import cpu_times, steal_percent
+from rwpend_bench.bench import cpu_times, steal_percent
 
 
 def test_steal_percent():
@@ -19,7 +19,7 @@ def test_cpu_times_reads_proc_stat():
 
 
 def test_scale_carried_is_the_last_step_within_the_limit():
-    from rwpend_bringup.bench import scale_carried
+    from rwpend_bench.bench import scale_carried
     steps = [{'rigs': 1, 'late_fraction': 0.0}, {'rigs': 3, 'late_fraction': 0.002},
              {'rigs': 2, 'late_fraction': 0.001}]
     assert scale_carried(steps) == 2                   # 0.1 % itself is within the limit
@@ -30,7 +30,7 @@ def test_scale_carried_is_the_last_step_within_the_limit():
 
 
 def test_scale_step_figures_pool_the_rigs_samples():
-    from rwpend_bringup.bench import scale_step_figures
+    from rwpend_bench.bench import scale_step_figures
     rigs = [{'plant_rx_late_samples': 1, 'plant_traced_samples': 1000, 'plant_rx_late_fraction': 0.001,
              'plant_latency_us': {'p50': 300.0}},
             {'plant_rx_late_samples': 5, 'plant_traced_samples': 1000, 'plant_rx_late_fraction': 0.005,
@@ -42,7 +42,7 @@ def test_scale_step_figures_pool_the_rigs_samples():
 
 
 def test_window_seqs_from_the_ticks(tmp_path):
-    from rwpend_bringup.bench import window_seqs
+    from rwpend_bench.bench import window_seqs
     (tmp_path / 'sim-1.trace').write_text(''.join(f'sim.tick {k} {1000 + 10 * k}\n' for k in range(10)))
     assert window_seqs(tmp_path, 1020, 1060) == (2, 5)
     assert window_seqs(tmp_path, 0, 10) is None
