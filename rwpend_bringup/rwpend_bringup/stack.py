@@ -506,7 +506,7 @@ def console_spec(stack: Stack, plant_spec: NodeSpec) -> NodeSpec:
     simulator's sample 0 waits for one more subscriber of ``state``: the console takes state
     while a page watches the rig, so the run starts when the page is open. ValueError for a bad
     address."""
-    from rwpend_console.console import parse_console_address
+    from .addresses import parse_console_address
     listen, port = parse_console_address(stack.console)
     if stack.plant == 'sim' and stack.lockstep:
         plant_spec.params['start.state_subscribers'] = plant_spec.params.get('start.state_subscribers', 0) + 1

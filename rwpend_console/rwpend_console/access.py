@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from typing import Mapping
 from urllib.parse import urlsplit
 
+from rwpend_bringup.addresses import parse_listen
+
 #: what a request does
 VIEW = 'view'          # read: the page, the stream, parameters, bags, a design preview
 ESTOP = 'estop'        # raise the e-stop: always allowed
@@ -47,33 +49,11 @@ def check_token_text(token: str) -> str:
     return token
 
 
-def parse_listen(text: str) -> str:
-    """``--listen`` value: an IPv4/IPv6 address or ``localhost``; ValueError with the reason."""
-    text = (text or '').strip()
-    if text == 'localhost':
-        return '127.0.0.1'
-    try:
-        return str(ipaddress.ip_address(text.strip('[]')))
-    except ValueError:
-        raise ValueError(f'--listen expects an IP address (127.0.0.1, 0.0.0.0, ::, or one of this '
-                         f"machine's addresses), got {text!r}") from None
-
-
 def is_loopback(address: str) -> bool:
     try:
         return ipaddress.ip_address(address.strip('[]')).is_loopback
     except ValueError:
         return address == 'localhost'
-
-
-def parse_port(text) -> int:
-    try:
-        port = int(str(text), 10)
-    except ValueError:
-        raise ValueError(f'a port is an integer in 1..65535, got {text!r}') from None
-    if not 1 <= port <= 65535:
-        raise ValueError(f'a port is an integer in 1..65535, got {port}')
-    return port
 
 
 def host_name(host_header: str) -> str:

@@ -26,7 +26,9 @@ import sys
 import threading
 import time
 
-from .access import is_loopback, parse_listen, parse_port
+from rwpend_bringup.addresses import parse_listen, parse_port
+
+from .access import is_loopback
 from .console import Parser, argtype
 from .decimate import RateLimiter
 

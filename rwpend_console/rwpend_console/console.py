@@ -21,7 +21,9 @@ import sys
 import threading
 from pathlib import Path
 
-from .access import AccessPolicy, check_token_text, new_token, parse_listen, parse_port
+from rwpend_bringup.addresses import parse_listen, parse_port
+
+from .access import AccessPolicy, check_token_text, new_token
 
 DEFAULT_PORT = 8080
 DEFAULT_BRIDGE_PORT = 8765
@@ -70,23 +72,6 @@ def _ns(text) -> str:
     if not _NS_RE.fullmatch(ns):
         raise ValueError(f'invalid namespace {text!r} (letters, digits, _; e.g. /rig2)')
     return ns
-
-
-def parse_console_address(text: str) -> tuple[str, int]:
-    """``up --console`` value: 'PORT', 'LISTEN:PORT' or '[IPv6]:PORT' -> (listen, port)."""
-    text = str(text).strip()
-    if text.startswith('['):
-        host, sep, port = text[1:].partition(']:')
-    elif text.count(':') == 1:
-        host, sep, port = text.partition(':')
-    else:
-        host, sep, port = '127.0.0.1', ':', text
-    if not sep:
-        raise ValueError(f'--console expects [LISTEN:]PORT (e.g. 8080 or 0.0.0.0:8080), got {text!r}')
-    try:
-        return parse_listen(host), parse_port(port)
-    except ValueError as exc:
-        raise ValueError(f'--console {text}: {exc}') from None
 
 
 def parser() -> Parser:

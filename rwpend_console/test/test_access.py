@@ -2,23 +2,10 @@
 import pytest
 
 from rwpend_console.access import (CHANGE, ESTOP, TOKEN_HEADER, VIEW, AccessPolicy, check_token_text,
-                                   host_name, is_loopback, new_token, parse_listen, parse_port)
+                                   host_name, is_loopback, new_token)
 
 TOKEN = 'abcdefghijklmnop_1234'
 JSON = {'Content-Type': 'application/json'}
-
-
-def test_parse_listen_and_port():
-    assert parse_listen('localhost') == '127.0.0.1'
-    assert parse_listen('0.0.0.0') == '0.0.0.0'
-    assert parse_listen('[::1]') == '::1'
-    for bad in ('', 'example.org', '300.1.1.1', '0.0.0.0:80'):
-        with pytest.raises(ValueError, match='--listen'):
-            parse_listen(bad)
-    assert parse_port('8080') == 8080
-    for bad in ('0', '65536', 'http', '80.5'):
-        with pytest.raises(ValueError, match='port'):
-            parse_port(bad)
 
 
 def test_tokens():

@@ -1,7 +1,7 @@
 """The console's command line: bad arguments are refused with the reason."""
 import pytest
 
-from rwpend_console.console import parse_console_address, parser, url
+from rwpend_console.console import parser, url
 
 
 def args(*a):
@@ -22,15 +22,6 @@ def test_bad_arguments(argv, why, capsys):
     with pytest.raises(SystemExit) as e:
         args(*argv)
     assert e.value.code == 2 and why in capsys.readouterr().err
-
-
-def test_console_addresses():
-    assert parse_console_address('8080') == ('127.0.0.1', 8080)
-    assert parse_console_address('0.0.0.0:9000') == ('0.0.0.0', 9000)
-    assert parse_console_address('[::1]:8081') == ('::1', 8081)
-    for bad in ('x', 'host:80', '0.0.0.0:', '70000'):
-        with pytest.raises(ValueError, match='--console'):
-            parse_console_address(bad)
 
 
 def test_urls():
