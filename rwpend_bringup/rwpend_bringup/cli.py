@@ -599,83 +599,56 @@ def graph_main(argv) -> int:
 
 
 # ------------------------------------------------------------------ delegated commands
-def gains_main(argv) -> int:
-    from rwpend_control.gains_cli import main
-    return main(argv)
+#: The commands implemented in other packages, by name: 'module:function' (like ros2cli's entry
+#: points), the module imported when its command runs. rwpend_bringup imports none of the
+#: packages above it (tests/test_layering.py); each function takes the command's arguments and
+#: returns the exit status.
+DELEGATED = {
+    'gains': 'rwpend_control.gains_cli:main',
+    'record': 'rwpend_bag.cli:record_main',
+    'play': 'rwpend_bag.cli:play_main',
+    'analyze': 'rwpend_bag.cli:analyze_main',
+    'emulate': 'rwpend_driver.emulator:main',
+    'bench': 'rwpend_bench.bench:main',
+    'soak': 'rwpend_bench.soak:main',
+    'lab': 'rwpend_lab.cli:main',
+    'identify': 'rwpend_ident.cli:main',
+    'console': 'rwpend_console.console:main',
+    'bridge': 'rwpend_console.bridge:main',
+    'sweep': 'rwpend_sweep.cli:main',
+}
+
+
+class NotInstalled(RuntimeError):
+    """The module of a delegated command is not installed (its package is missing)."""
+
+
+def resolve(target: str):
+    """The function of a 'module:function' target, its module imported now; NotInstalled when
+    the module (or its package) is missing -- not when something the module imports is."""
+    import importlib
+    module, _, name = target.partition(':')
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        parts = module.split('.')
+        if exc.name not in {'.'.join(parts[:i]) for i in range(1, len(parts) + 1)}:
+            raise
+        raise NotInstalled(f'{module} is not installed (make setup)') from None
+    return getattr(mod, name)
 
 
 def bag_main(argv) -> int:
-    from rwpend_bag import cli
+    """``bag info BAG``: the one ``bag`` subcommand."""
     if not argv or argv[0] != 'info':
         print('usage: rwpend bag info BAG', file=sys.stderr)
         return 2
-    return cli.info_main(argv[1:])
-
-
-def record_main(argv) -> int:
-    from rwpend_bag.cli import record_main as m
-    return m(argv)
-
-
-def play_main(argv) -> int:
-    from rwpend_bag.cli import play_main as m
-    return m(argv)
-
-
-def analyze_main(argv) -> int:
-    from rwpend_bag.cli import analyze_main as m
-    return m(argv)
-
-
-def emulate_main(argv) -> int:
-    from rwpend_driver.emulator import main
-    return main(argv)
-
-
-def bench_main(argv) -> int:
-    try:
-        from rwpend_bench.bench import main
-    except ImportError:
-        return fail('rwpend bench', 'the benchmark is not available in this version', 1)
-    return main(argv)
-
-
-def soak_main(argv) -> int:
-    from rwpend_bench.soak import main
-    return main(argv)
-
-
-def lab_main(argv) -> int:
-    from rwpend_lab.cli import main
-    return main(argv)
-
-
-def identify_main(argv) -> int:
-    from rwpend_ident.cli import main
-    return main(argv)
-
-
-def console_main(argv) -> int:
-    from rwpend_console.console import main
-    return main(argv)
-
-
-def bridge_main(argv) -> int:
-    from rwpend_console.bridge import main
-    return main(argv)
-
-
-def sweep_main(argv) -> int:
-    from rwpend_sweep.cli import main
-    return main(argv)
+    return resolve('rwpend_bag.cli:info_main')(argv[1:])
 
 
 COMMANDS = {
     'up': up_main, 'node': node_main, 'sim': sim_main, 'demo': demo_main, 'param': param_main, 'mode': mode_main,
-    'tap': tap_main, 'estop': estop_main, 'graph': graph_main, 'gains': gains_main, 'record': record_main,
-    'play': play_main, 'bag': bag_main, 'analyze': analyze_main, 'emulate': emulate_main,
-    'bench': bench_main, 'soak': soak_main, 'lab': lab_main, 'identify': identify_main,
-    'console': console_main, 'bridge': bridge_main, 'sweep': sweep_main,
+    'tap': tap_main, 'estop': estop_main, 'graph': graph_main, 'bag': bag_main,
 }
 
 
@@ -688,11 +661,14 @@ def main(argv=None) -> int:
     apply_network_defaults()
     from rwpend_ros.transport import apply_transport_or_exit
     apply_transport_or_exit()   # every node and tool started from here inherits it
-    if cmd not in COMMANDS:
+    if cmd not in COMMANDS and cmd not in DELEGATED:
         print(f'rwpend: unknown command {cmd!r}; `./rwpend --help` lists them', file=sys.stderr)
         return 2
     try:
-        return COMMANDS[cmd](argv[1:])
+        run = COMMANDS[cmd] if cmd in COMMANDS else resolve(DELEGATED[cmd])
+        return run(argv[1:])
+    except NotInstalled as exc:
+        return fail(f'rwpend {cmd}', str(exc), 1)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     except KeyboardInterrupt:
