@@ -19,12 +19,12 @@ def test_delegated_targets_resolve(cmd):
 
 
 def test_a_missing_module_is_not_installed_and_a_broken_one_says_why(tmp_path, monkeypatch):
-    with pytest.raises(cli.NotInstalled, match='rwpend_nothing.cli is not installed'):
-        cli.resolve('rwpend_nothing.cli:main')
-    (tmp_path / 'rwpend_broken_x.py').write_text('import rwpend_no_such_dependency\n')
+    with pytest.raises(cli.NotInstalled, match='no_such_package_xyz.cli is not installed'):
+        cli.resolve('no_such_package_xyz.cli:main')
+    (tmp_path / 'broken_module_xyz.py').write_text('import no_such_dependency_xyz\n')
     monkeypatch.syspath_prepend(str(tmp_path))
-    with pytest.raises(ModuleNotFoundError, match='rwpend_no_such_dependency'):
-        cli.resolve('rwpend_broken_x:main')
+    with pytest.raises(ModuleNotFoundError, match='no_such_dependency_xyz'):
+        cli.resolve('broken_module_xyz:main')
 
 
 def test_bag_takes_info_only(capsys):
