@@ -1,7 +1,7 @@
 """``./rwpend bench`` -- the real-time / lockstep benchmark of the whole stack (issue 8).
 
 What it runs (every run is the full stack started by :class:`rwpend_bringup.launch.Launcher`
-from :func:`rwpend_bringup.cli.build_stack`, i.e. exactly what ``./rwpend up`` runs, with
+from :func:`rwpend_bringup.stack.plan`, i.e. exactly what ``./rwpend up`` runs, with
 ``--rt-priority 50 --cpu-latency 0`` unless told otherwise; PERFORMANCE.md, "What each mechanism
 buys"):
 
@@ -64,6 +64,7 @@ import signal
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from rwpend_ros.transport import transport_choice
@@ -72,8 +73,8 @@ from rwpend_bringup.launch import Launcher
 
 DEFAULT_PERIODS = (0.001, 0.0005)
 #: bench layouts -> ./rwpend up arguments
-LAYOUT_ARGS = {'loop': ['--composed', 'loop'], 'separate': ['--composed', 'none'],
-               'control': ['--composed', 'control']}
+#: the benchmark's layouts: their names -> rwpend_bringup.stack.Stack.layout
+LAYOUTS = {'loop': 'loop', 'separate': 'none', 'control': 'control'}
 #: ``--pin`` of the real-time runs by default (when CPUs 0 and 1 are usable): separate processes
 #: only, the simulator and the estimator on CPU 0, the controller on CPU 1, the recorder free.
 #: Measured (PERFORMANCE.md, "What each mechanism buys"): lower median latency in 10 of 10
@@ -261,51 +262,56 @@ def realtime_pins(pin: list[str] | None, layouts) -> dict[str, tuple[str, ...]]:
     """The ``--pin`` items of each layout's real-time runs: the defaults (:data:`DEFAULT_PINS`,
     when CPUs 0 and 1 are usable) when ``pin`` is None, nothing for ``['none']``; else those items whose
     process the layout runs. ValueError for a process no layout of the run has, or a bad item."""
-    from rwpend_bringup.cli import parse_pins, usable_cpus
+    from rwpend_bringup import stack
     if pin is None:
-        return dict(DEFAULT_PINS) if {0, 1} <= usable_cpus() else {}
+        return dict(DEFAULT_PINS) if {0, 1} <= stack.usable_cpus() else {}
     if [v.strip().lower() for v in pin] == ['none']:
         return {}
     # each layout's processes as ./rwpend up builds them, and the recorder of every real-time run
-    processes = {x: {s.name for s in _stack(list(LAYOUT_ARGS[x]))[1]} | {'recorder'} for x in layouts}
-    parsed = parse_pins(pin, sorted(set().union(*processes.values())))   # the reason for a bad item
+    processes = {x: {s.name for s in _plan(stack.Stack(layout=LAYOUTS[x], rt_priority=0)).specs} | {'recorder'}
+                 for x in layouts}
+    parsed = stack.parse_pins(pin)      # the reason for a bad item
+    stack.check_pins(parsed, sorted(set().union(*processes.values())))
     out = {}
     for x in layouts:
-        mine = tuple(f'{k}={v}' for k, v in parsed.items() if k in processes[x])
+        mine = tuple(f'{k}={",".join(map(str, v))}' for k, v in parsed.items() if k in processes[x])
         if mine:
             out[x] = mine
     return out
 
 
-def _stack(up_args: list[str]):
-    """(parsed args, specs, params files) of ``./rwpend up UP_ARGS`` (cli.build_stack)."""
-    from rwpend_bringup.cli import Parser, add_stack_args, build_stack
-    p = Parser(prog='rwpend bench')
-    add_stack_args(p)
-    a = p.parse_args(up_args)
-    specs, files = build_stack(a, p.prog)
-    return a, specs, files
+def _plan(stack):
+    """The processes of ``stack`` (:func:`rwpend_bringup.stack.plan`, what ``./rwpend up`` runs)."""
+    from rwpend_bringup.stack import plan
+    return plan(stack)
+
+
+def _base(base):
+    """The stack every run starts from (the benchmark's ``--set``, priority...): ``base`` or up's."""
+    from rwpend_bringup.stack import Stack
+    return Stack() if base is None else base
 
 
 def _cpu_latency_request(a):
     """The ``--cpu-latency`` PM QoS request of a run (what ``rwpend up`` holds for its stack),
     held by the benchmark while the run's launcher runs; a no-op without the option."""
     from rwpend_ros.sched import request_cpu_latency
-    req = request_cpu_latency(getattr(a, 'cpu_latency', None))
+    req = request_cpu_latency(a.cpu_latency)
     if req.us is not None and not req.active:
         print(f'rwpend bench: CPU wake-up latency request {req.status}', file=sys.stderr, flush=True)
     return req
 
 
 def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
-                 ns: str, echo=None, up_extra=(), spec_hook=None, tag: str | None = None) -> dict:
+                 ns: str, echo=None, base=None, spec_hook=None, tag: str | None = None) -> dict:
+    """A real-time run of ``base`` (a :class:`rwpend_bringup.stack.Stack`; up's by default) in
+    ``layout``, mode auto, recorded; judged from its bag."""
     tag = tag or f'rt_{layout}_h{h * 1e6:g}us'
     bag = out / tag
     if bag.exists():
         shutil.rmtree(bag)
-    up = ['--mode', 'auto', '--h', repr(h), '--record', str(bag), '--ns', ns, *up_extra]
-    up += LAYOUT_ARGS[layout]
-    a, specs, files = _stack(up)
+    run = _plan(replace(_base(base), mode='auto', h=h, record=str(bag), ns=ns, layout=LAYOUTS[layout]))
+    a, specs, files = run.stack, run.specs, run.files
     if spec_hook is not None:
         spec_hook(specs)
     log = _Tee(out / f'{tag}.log', echo)
@@ -368,7 +374,7 @@ def judged(bag: Path) -> dict:
             'problems': list(v.problems), 'source': v.source}
 
 
-def run_rig(out: Path, h: float, duration: float, env: dict, ns: str, echo=None, up_extra=(),
+def run_rig(out: Path, h: float, duration: float, env: dict, ns: str, echo=None, base=None,
             rt_priority: int = 0) -> dict:
     """A real-time run of the rig path: the device's firmware core on a pseudo-terminal (``./rwpend
     emulate``, a process of its own, 10 real-time priorities above the loop where the loop has
@@ -390,7 +396,7 @@ def run_rig(out: Path, h: float, duration: float, env: dict, ns: str, echo=None,
             return {'layout': 'rig', 'h_s': h, 'rate_hz': round(1.0 / h),
                     'error': f'the emulator did not start (its log: {emu_log})'}
         res = run_realtime(out, h, duration, 'loop', env, ns, echo,
-                           up_extra=[*up_extra, '--plant', f'serial:{link}'], tag=tag)
+                           base=replace(_base(base), plant=f'serial:{link}'), tag=tag)
     finally:
         emu.send_signal(signal.SIGINT)
         try:
@@ -572,17 +578,16 @@ def plant_late(b, nsp: str, h: float, cs, cmd, ks) -> dict:
 
 
 def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, env: dict,
-                 ns: str, echo=None, up_extra=(), spec_hook=None, tag: str | None = None) -> dict:
+                 ns: str, echo=None, base=None, spec_hook=None, tag: str | None = None) -> dict:
+    """A lockstep run of ``base`` (a :class:`rwpend_bringup.stack.Stack`; up's by default) in
+    ``layout``, mode auto, ``sim_s`` simulated seconds, with or without the recorder."""
     tag = tag or f'ls_{layout}_h{h * 1e6:g}us_{"rec" if record else "norec"}'
-    up = ['--lockstep', '--mode', 'auto', '--duration', repr(sim_s), '--h', repr(h), '--ns', ns,
-          *up_extra]
     bag = out / tag
-    if record:
-        if bag.exists():
-            shutil.rmtree(bag)
-        up += ['--record', str(bag)]
-    up += LAYOUT_ARGS[layout]
-    a, specs, files = _stack(up)
+    if record and bag.exists():
+        shutil.rmtree(bag)
+    run = _plan(replace(_base(base), lockstep=True, mode='auto', duration=sim_s, h=h, ns=ns,
+                        record=str(bag) if record else None, layout=LAYOUTS[layout]))
+    a, specs, files = run.stack, run.specs, run.files
     if spec_hook is not None:
         spec_hook(specs)
     log = _Tee(out / f'{tag}.log', echo)
@@ -707,7 +712,7 @@ def window_seqs(directory: Path, t0_ns: int, t1_ns: int) -> tuple[int, int] | No
 
 
 def run_scale(out: Path, h: float, duration: float, max_rigs: int, env: dict, layout: str,
-              echo=None, up_extra=(), say=None, limit: float = SCALE_LATE_LIMIT) -> dict:
+              echo=None, base=None, say=None, limit: float = SCALE_LATE_LIMIT) -> dict:
     """1, 2, 3 ... simulated rigs in real time at once on this machine, each the stack of
     ``./rwpend up --mode auto`` (``layout``, no recorder) in a namespace and domain id of its own
     (/scaleN, the environment's domain id + N - 1: one rig per domain, as a lab separates them),
@@ -727,8 +732,8 @@ def run_scale(out: Path, h: float, duration: float, max_rigs: int, env: dict, la
         try:
             for i in range(1, n + 1):
                 ns = f'/scale{i}'
-                a, specs, files = _stack(['--mode', 'auto', '--h', repr(h), '--ns', ns, *up_extra,
-                                          *LAYOUT_ARGS[layout]])
+                run = _plan(replace(_base(base), mode='auto', h=h, ns=ns, layout=LAYOUTS[layout], pins={}))
+                a, specs, files = run.stack, run.specs, run.files
                 if cpu_req is None:
                     cpu_req = _cpu_latency_request(a)
                 renv, tdir = _with_trace({**env, 'ROS_DOMAIN_ID': str(base + i - 1)},
@@ -896,7 +901,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('-o', '--out', default=None, help='output directory (default bench_out/)')
     p.add_argument('--h', type=float, action='append', default=None, metavar='S',
                    help='sample period(s) to run (repeatable; default 0.001 and 0.0005)')
-    p.add_argument('--layout', action='append', default=None, choices=(*LAYOUT_ARGS, 'both', 'all'),
+    p.add_argument('--layout', action='append', default=None, choices=(*LAYOUTS, 'both', 'all'),
                    help='loop: the loop in one thread of one process (the default of up, '
                    'rwpend_loop.host); separate: every node its own process; control: estimator and '
                    'controller in one loop process fed by the encoders topic, the plant in its own (up '
@@ -915,7 +920,7 @@ def _parser() -> argparse.ArgumentParser:
                    'the late fraction at the plants passes 0.1 %%')
     p.add_argument('--scale-duration', type=float, default=None, metavar='S',
                    help='wall seconds measured at each step of the scale run (default 20; 8 with --quick)')
-    p.add_argument('--scale-layout', default='loop', choices=tuple(LAYOUT_ARGS),
+    p.add_argument('--scale-layout', default='loop', choices=tuple(LAYOUTS),
                    help='the layout of each rig of the scale run (default loop: one process '
                    'per rig, the cheapest)')
     p.add_argument('--domain-id', type=int, default=None,
@@ -944,6 +949,7 @@ def main(argv=None) -> int:
     p = _parser()
     a = p.parse_args(sys.argv[1:] if argv is None else list(argv))
     from rwpend_bringup.cli import ROOT
+    from rwpend_bringup.stack import Stack, overrides_from, parse_pins
     duration = a.duration if a.duration is not None else (8.0 if a.quick else 60.0)
     ls_dur = a.lockstep_duration if a.lockstep_duration is not None else (4.0 if a.quick else 12.0)
     if not (duration > 0 and ls_dur > 0):
@@ -955,7 +961,7 @@ def main(argv=None) -> int:
         return 2
     layouts = []
     for name in a.layout or ['all']:
-        for x in {'both': ['loop', 'separate'], 'all': list(LAYOUT_ARGS)}.get(name, [name]):
+        for x in {'both': ['loop', 'separate'], 'all': list(LAYOUTS)}.get(name, [name]):
             if x not in layouts:
                 layouts.append(x)
     out = Path(a.out) if a.out else ROOT / 'bench_out'
@@ -970,16 +976,17 @@ def main(argv=None) -> int:
     if not 0 <= a.rt_priority <= 99:
         print('rwpend bench: error: --rt-priority must be in 0..99', file=sys.stderr)
         return 2
-    up_extra = ['--rt-priority', str(a.rt_priority), *(x for v in a.set for x in ('--set', v))]
     cpu_latency = None if str(a.cpu_latency).lower() == 'none' else a.cpu_latency
-    if cpu_latency is not None:
-        up_extra += ['--cpu-latency', str(cpu_latency)]
     try:
-        _stack(up_extra)      # refuse bad --set before any run
+        if cpu_latency is not None:
+            if not str(cpu_latency).strip().isdigit():
+                raise ValueError(f'--cpu-latency expects microseconds (an integer >= 0) or none, got {cpu_latency!r}')
+            cpu_latency = int(cpu_latency)
+        base = Stack(rt_priority=a.rt_priority, overrides=overrides_from(a.set), cpu_latency=cpu_latency)
+        _plan(base)      # refuse a bad --set before any run
         pins = realtime_pins(a.pin, layouts)
-    except (ValueError, SystemExit) as exc:
-        if not isinstance(exc, SystemExit):
-            print(f'rwpend bench: error: {exc}', file=sys.stderr)
+    except ValueError as exc:
+        print(f'rwpend bench: error: {exc}', file=sys.stderr)
         return 2
     res = {'started': time.time(), 'machine': machine_info(),
            'settings': {'duration_s': duration, 'lockstep_duration_s': ls_dur, 'periods_s': list(periods),
@@ -996,13 +1003,13 @@ def main(argv=None) -> int:
                 for h in periods:
                     say(f'rwpend bench: real time, {layout}, h = {h * 1e3:g} ms, {duration:g} s ...')
                     r = run_realtime(out, h, duration, layout, env, a.ns, echo,
-                                     up_extra=[*up_extra, *(x for v in pins.get(layout, ()) for x in ('--pin', v))])
+                                     base=replace(base, pins=parse_pins(pins.get(layout, ()))))
                     res['realtime'].append(r)
             if not a.no_rig:
                 for h in periods:
                     say(f'rwpend bench: real time, the rig through the emulator, h = {h * 1e3:g} ms, '
                         f'{duration:g} s ...')
-                    res['realtime'].append(run_rig(out, h, duration, env, a.ns, echo, up_extra=up_extra,
+                    res['realtime'].append(run_rig(out, h, duration, env, a.ns, echo, base=base,
                                                    rt_priority=a.rt_priority))
         if not a.no_lockstep:
             for layout in layouts:
@@ -1010,14 +1017,14 @@ def main(argv=None) -> int:
                     say(f'rwpend bench: lockstep, {layout}, {ls_dur:g} s simulated, '
                         f'recorder {"on" if record else "off"} ...')
                     res['lockstep'].append(run_lockstep(out, periods[0], ls_dur, layout, record, env,
-                                                        a.ns, echo, up_extra=up_extra))
+                                                        a.ns, echo, base=base))
         if not a.no_scale and a.scale_max >= 1:
             sdur = a.scale_duration if a.scale_duration is not None else (8.0 if a.quick else 20.0)
             res['settings'].update({'scale_duration_s': sdur, 'scale_max': a.scale_max,
                                     'scale_layout': a.scale_layout})
             # no pinning: n rigs share the CPUs as the scheduler places them
             res['scale'] = run_scale(out, periods[0], sdur, a.scale_max, env, a.scale_layout, echo,
-                                     up_extra=up_extra, say=say)
+                                     base=base, say=say)
         if not a.no_sweep:
             say('rwpend bench: robustness-study speed (./rwpend sweep, pure core) ...')
             from rwpend_sweep.bench import bench as sweep_bench
