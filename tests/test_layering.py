@@ -265,3 +265,20 @@ def test_the_checker_reports_a_cycle_with_each_import(tmp_path):
     assert layer_problems(root, [Edge('pkg_b', 'pkg_d', 'pkg_d.w', 'pkg_b/pkg_b/v.py', 3)],
                           layers, {'pkg_msgs'}, 'pkg_')[1:] == [
         'pkg_b/pkg_b/v.py:3: pkg_b imports pkg_d.w: pkg_d has no layer']
+
+
+def test_each_package_declares_the_packages_it_imports():
+    """package.xml (what colcon and rosdep read) lists every rwpend_* package the code imports,
+    as an ``exec_depend`` (or ``depend``)."""
+    import re
+    missing = []
+    edges = edges_of(ROOT)
+    for pkg in package_folders(ROOT):
+        xml = ROOT / pkg / 'package.xml'
+        if not xml.is_file():
+            continue
+        declared = set(re.findall(r'<(?:exec_)?depend>(rwpend_\w+)</(?:exec_)?depend>', xml.read_text()))
+        for dst in sorted({e.dst for e in edges if e.src == pkg} - declared):
+            missing.append(f'{pkg}/package.xml: no <exec_depend>{dst}</exec_depend> (imported by '
+                           f'{next(e.where() for e in edges if e.src == pkg and e.dst == dst)})')
+    assert not missing, '\n'.join(missing)
