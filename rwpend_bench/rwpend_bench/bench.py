@@ -64,7 +64,7 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from rwpend_ros.transport import transport_choice
@@ -468,17 +468,7 @@ def bag_metrics(bag: Path, ns: str, h: float, window_ns: tuple[int, int] | None 
     b = read_bag(bag)
     nsp = ns.rstrip('/')
     t_enc, t_cmd = f'{nsp}/encoders', f'{nsp}/command'
-    m: dict = {}
-    report = {}
-    rf = Path(bag) / 'recording_report.json'
-    if rf.is_file():
-        report = json.loads(rf.read_text()).get('topics', {})
-    dropped = {}
-    for name in (t_enc, f'{nsp}/sim/true_state', f'{nsp}/state', t_cmd):
-        r = report.get(name)
-        dropped[name] = None if r is None else r.get('missing')
-    m['dropped'] = dropped
-    m['dropped_source'] = 'seq gaps seen by the recorder over the whole run (recording_report.json)'
+    m: dict = _dropped(bag, (t_enc, f'{nsp}/sim/true_state', f'{nsp}/state', t_cmd))
     if t_enc not in b.topics or t_cmd not in b.topics or not b.topics[t_cmd].count:
         m['error'] = 'no encoders/command in the bag'
         m['samples'] = 0
@@ -524,6 +514,25 @@ def bag_metrics(bag: Path, ns: str, h: float, window_ns: tuple[int, int] | None 
     m['late_fraction'] = float(late.mean())
     m['late_definition'] = 'command k received after the instant of sample k+1, or never'
     m.update(plant_late(b, nsp, h, cs, cmd, ks))
+    m.update(_receive_times(h, ks, ts, te, tc, answered))
+    return m
+
+
+def _dropped(bag: Path, topics) -> dict:
+    """The messages of ``topics`` the recorder saw missing (its recording report)."""
+    report = {}
+    rf = Path(bag) / 'recording_report.json'
+    if rf.is_file():
+        report = json.loads(rf.read_text()).get('topics', {})
+    return {'dropped': {name: None if report.get(name) is None else report[name].get('missing') for name in topics},
+            'dropped_source': 'seq gaps seen by the recorder over the whole run (recording_report.json)'}
+
+
+def _receive_times(h: float, ks, ts, te, tc, answered) -> dict:
+    """Loop time, publish delay, period and jitter from the recorder's receive times of the
+    samples ``ks`` (per seq: ``ts`` sample instant, ``te`` encoders and ``tc`` command received)."""
+    import numpy as np
+    m: dict = {}
     both = answered & (te[ks] >= 0)
     m['loop_us'] = percentiles((tc[ks] - te[ks])[both] / 1e3)
     m['loop_source'] = 'recorder receive time of command seq k minus that of encoders seq k'
@@ -793,6 +802,7 @@ def _fmt(v, nd=0):
 
 
 def summary_text(res: dict) -> str:
+    """The benchmark's results (bench.json) as the text ``./rwpend bench`` prints."""
     m = res['machine']
     st = res['settings']
     lines = ['rwpend bench -- ' + time.strftime('%Y-%m-%d %H:%M', time.localtime(res['started'])),
@@ -805,56 +815,9 @@ def summary_text(res: dict) -> str:
              f"{st['lockstep_duration_s']:g} s lockstep"
              + ''.join(f"; {x} pinned {' '.join(v)}" for x, v in (st.get('pin_realtime') or {}).items())]
     if res['realtime']:
-        lines.append('real time (recorder running). latency = sample instant -> command at the recorder '
-                     '(us); late = command k after sample k+1')
-        lines.append(f"  {'layout':<9} {'rate':>6} {'samples':>8} {'lat p50':>8} {'p99':>7} {'p99.9':>7} "
-                     f"{'max':>7} {'late%':>7} {'plant%':>7} {'jit p99':>8} {'dropped':>8} {'CPU':>5} {'other':>6} "
-                     f"{'steal%':>6}")
-        for r in res['realtime']:
-            lat = r.get('latency_us') or {}
-            jit = r.get('jitter_us') or {}
-            drops = [v for v in (r.get('dropped') or {}).values() if v is not None]
-            late, plate = r.get('late_fraction'), r.get('plant_late_fraction')
-            lines.append(
-                f"  {r['layout']:<9} {r['rate_hz']:>4}Hz {r.get('samples', 0):>8} {_fmt(lat.get('p50')):>8} "
-                f"{_fmt(lat.get('p99')):>7} {_fmt(lat.get('p99.9')):>7} {_fmt(lat.get('max')):>7} "
-                f"{_fmt(None if late is None else 100 * late, 3):>7} "
-                f"{_fmt(None if plate is None else 100 * plate, 3):>7} {_fmt(jit.get('p99')):>8} "
-                f"{sum(drops) if drops else 'n/a':>8} {_fmt(r.get('cpu_cores_total'), 2):>5} "
-                f"{_fmt(r.get('other_cpu_cores'), 2):>6} {_fmt(r.get('host_steal_pct'), 1):>6}")
-            pl = r.get('plant_latency_us')
-            if pl:
-                pr = r.get('plant_rx_late_fraction')
-                lines.append(f"            at the plant (trace): latency p50 {_fmt(pl.get('p50'))}, p99 "
-                             f"{_fmt(pl.get('p99'))}, p99.9 {_fmt(pl.get('p99.9'))}, max {_fmt(pl.get('max'))} us; "
-                             f"late {_fmt(None if pr is None else 100 * pr, 3)} %")
-                lines.append('            stages p50/p99 (us): ' + _stages_text(r.get('stages_us')))
-            j = r.get('judged') or {}
-            if 'late_fraction' in j:
-                lines.append(f"            judged from the bag, per sample ({j['source']}): late "
-                             f"{100 * j['late_fraction']:.3f} %, at zero {100 * j['zero_fraction']:.3f} % of "
-                             f"{j['timed_samples']}; falls {j['falls']}, alive at the end {j['alive_at_end']}")
-            elif j:
-                lines.append(f"            judged from the bag: {j.get('error')}")
-            if r.get('error'):
-                lines.append(f"            error: {r['error']}")
-            lines.append('            CPU per process (cores): ' + ', '.join(
-                f'{k} {_fmt(v, 2)}' for k, v in r.get('cpu_cores', {}).items())
-                + f"; load {r.get('loadavg_before')}")
+        lines += _realtime_text(res['realtime'])
     if res['lockstep']:
-        lines.append('lockstep (simulated s per wall s; CPU s per simulated s, all processes):')
-        for r in res['lockstep']:
-            drops = [v for v in (r.get('dropped') or {}).values() if v is not None]
-            rec = ('no ' if not r['recorder'] else
-                   f"yes (dropped {sum(drops) if drops else 'n/a'})")
-            lines.append(f"  {r['layout']:<9} h={r['h_s'] * 1e3:g} ms  recorder {rec:<3}  "
-                         f"{_fmt(r['simulated_s'], 1)} s in "
-                         f"{_fmt(r['wall_s'], 2)} s = {_fmt(r['sim_per_wall'], 2)}x real time, CPU "
-                         f"{_fmt(r.get('cpu_s_per_simulated_s'), 2)} s/s; load {r.get('loadavg_before')}; "
-                         f"host steal {_fmt(r.get('host_steal_pct'), 1)} %")
-            if r.get('stages_us'):
-                lines.append(f"            step p50 {_fmt((r.get('step_us') or {}).get('p50'))} us; stages p50/p99 (us): "
-                             + _stages_text(r['stages_us']))
+        lines += _lockstep_text(res['lockstep'])
     sc = res.get('scale')
     if sc:
         lines.append(f"scale (simulated rigs at {1 / sc['h_s']:g} Hz on this machine, {sc['layout']} layout, "
@@ -879,6 +842,69 @@ def summary_text(res: dict) -> str:
                      f"{_fmt(d.get('decode_s'), 3)} s = {_fmt(d.get('msgs_per_s'))} msg/s decode, "
                      f"{_fmt(d.get('read_and_decode_msgs_per_s'))} msg/s read+decode")
     return '\n'.join(lines)
+
+
+
+
+def _realtime_text(runs: list[dict]) -> list[str]:
+    """The real-time runs' table, each run's judgement and CPU per process below its row."""
+    lines = []
+    lines.append('real time (recorder running). latency = sample instant -> command at the recorder '
+                 '(us); late = command k after sample k+1')
+    lines.append(f"  {'layout':<9} {'rate':>6} {'samples':>8} {'lat p50':>8} {'p99':>7} {'p99.9':>7} "
+                 f"{'max':>7} {'late%':>7} {'plant%':>7} {'jit p99':>8} {'dropped':>8} {'CPU':>5} {'other':>6} "
+                 f"{'steal%':>6}")
+    for r in runs:
+        lat = r.get('latency_us') or {}
+        jit = r.get('jitter_us') or {}
+        drops = [v for v in (r.get('dropped') or {}).values() if v is not None]
+        late, plate = r.get('late_fraction'), r.get('plant_late_fraction')
+        lines.append(
+            f"  {r['layout']:<9} {r['rate_hz']:>4}Hz {r.get('samples', 0):>8} {_fmt(lat.get('p50')):>8} "
+            f"{_fmt(lat.get('p99')):>7} {_fmt(lat.get('p99.9')):>7} {_fmt(lat.get('max')):>7} "
+            f"{_fmt(None if late is None else 100 * late, 3):>7} "
+            f"{_fmt(None if plate is None else 100 * plate, 3):>7} {_fmt(jit.get('p99')):>8} "
+            f"{sum(drops) if drops else 'n/a':>8} {_fmt(r.get('cpu_cores_total'), 2):>5} "
+            f"{_fmt(r.get('other_cpu_cores'), 2):>6} {_fmt(r.get('host_steal_pct'), 1):>6}")
+        pl = r.get('plant_latency_us')
+        if pl:
+            pr = r.get('plant_rx_late_fraction')
+            lines.append(f"            at the plant (trace): latency p50 {_fmt(pl.get('p50'))}, p99 "
+                         f"{_fmt(pl.get('p99'))}, p99.9 {_fmt(pl.get('p99.9'))}, max {_fmt(pl.get('max'))} us; "
+                         f"late {_fmt(None if pr is None else 100 * pr, 3)} %")
+            lines.append('            stages p50/p99 (us): ' + _stages_text(r.get('stages_us')))
+        j = r.get('judged') or {}
+        if 'late_fraction' in j:
+            lines.append(f"            judged from the bag, per sample ({j['source']}): late "
+                         f"{100 * j['late_fraction']:.3f} %, at zero {100 * j['zero_fraction']:.3f} % of "
+                         f"{j['timed_samples']}; falls {j['falls']}, alive at the end {j['alive_at_end']}")
+        elif j:
+            lines.append(f"            judged from the bag: {j.get('error')}")
+        if r.get('error'):
+            lines.append(f"            error: {r['error']}")
+        lines.append('            CPU per process (cores): ' + ', '.join(
+            f'{k} {_fmt(v, 2)}' for k, v in r.get('cpu_cores', {}).items())
+            + f"; load {r.get('loadavg_before')}")
+    return lines
+
+
+def _lockstep_text(runs: list[dict]) -> list[str]:
+    """The lockstep runs: speed, CPU, and where the time goes."""
+    lines = []
+    lines.append('lockstep (simulated s per wall s; CPU s per simulated s, all processes):')
+    for r in runs:
+        drops = [v for v in (r.get('dropped') or {}).values() if v is not None]
+        rec = ('no ' if not r['recorder'] else
+               f"yes (dropped {sum(drops) if drops else 'n/a'})")
+        lines.append(f"  {r['layout']:<9} h={r['h_s'] * 1e3:g} ms  recorder {rec:<3}  "
+                     f"{_fmt(r['simulated_s'], 1)} s in "
+                     f"{_fmt(r['wall_s'], 2)} s = {_fmt(r['sim_per_wall'], 2)}x real time, CPU "
+                     f"{_fmt(r.get('cpu_s_per_simulated_s'), 2)} s/s; load {r.get('loadavg_before')}; "
+                     f"host steal {_fmt(r.get('host_steal_pct'), 1)} %")
+        if r.get('stages_us'):
+            lines.append(f"            step p50 {_fmt((r.get('step_us') or {}).get('p50'))} us; stages p50/p99 (us): "
+                         + _stages_text(r['stages_us']))
+    return lines
 
 
 def _stages_text(st) -> str:
@@ -945,97 +971,121 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
-    p = _parser()
-    a = p.parse_args(sys.argv[1:] if argv is None else list(argv))
-    from rwpend_bringup.cli import ROOT
-    from rwpend_bringup.stack import Stack, overrides_from, parse_pins
+@dataclass
+class Settings:
+    """What a benchmark runs, from its command line (:func:`settings`)."""
+    duration: float             # s of each real-time run
+    ls_dur: float               # simulated s of each lockstep run
+    periods: tuple              # sample periods (s)
+    layouts: list               # names of LAYOUTS
+    base: object                # the rwpend_bringup.stack.Stack every run starts from
+    pins: dict                  # layout -> its real-time runs' --pin items
+    cpu_latency: int | None
+
+
+def settings(a) -> Settings:
+    """The :class:`Settings` of the parsed arguments ``a``; ValueError with the reason."""
+    from rwpend_bringup.stack import Stack, overrides_from
     duration = a.duration if a.duration is not None else (8.0 if a.quick else 60.0)
     ls_dur = a.lockstep_duration if a.lockstep_duration is not None else (4.0 if a.quick else 12.0)
     if not (duration > 0 and ls_dur > 0):
-        print('rwpend bench: error: durations must be > 0', file=sys.stderr)
-        return 2
+        raise ValueError('durations must be > 0')
     periods = tuple(a.h) if a.h else DEFAULT_PERIODS
     if any(not (1e-5 <= h <= 0.1) for h in periods):
-        print('rwpend bench: error: --h must be in [1e-5, 0.1] s', file=sys.stderr)
-        return 2
+        raise ValueError('--h must be in [1e-5, 0.1] s')
     layouts = []
     for name in a.layout or ['all']:
         for x in {'both': ['loop', 'separate'], 'all': list(LAYOUTS)}.get(name, [name]):
             if x not in layouts:
                 layouts.append(x)
-    out = Path(a.out) if a.out else ROOT / 'bench_out'
-    out.mkdir(parents=True, exist_ok=True)
+    if not 0 <= a.rt_priority <= 99:
+        raise ValueError('--rt-priority must be in 0..99')
+    cpu_latency = None if str(a.cpu_latency).lower() == 'none' else a.cpu_latency
+    if cpu_latency is not None:
+        if not str(cpu_latency).strip().isdigit():
+            raise ValueError(f'--cpu-latency expects microseconds (an integer >= 0) or none, got {cpu_latency!r}')
+        cpu_latency = int(cpu_latency)
+    base = Stack(rt_priority=a.rt_priority, overrides=overrides_from(a.set), cpu_latency=cpu_latency)
+    _plan(base)      # refuse a bad --set before any run
+    return Settings(duration, ls_dur, periods, layouts, base, realtime_pins(a.pin, layouts), cpu_latency)
+
+
+def _environment(a) -> dict:
+    """The runs' environment: their domain id (60 unless given), discovery on this host."""
     env = dict(os.environ)
     if a.domain_id is not None:
         env['ROS_DOMAIN_ID'] = str(a.domain_id)
     env.setdefault('ROS_DOMAIN_ID', '60')
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+def _run_all(a, st: Settings, out: Path, env: dict, res: dict, say) -> None:
+    """Every part of the benchmark the arguments ask for, its results into ``res``."""
+    from rwpend_bringup.stack import parse_pins
     echo = sys.stderr if a.verbose else None
-    if not 0 <= a.rt_priority <= 99:
-        print('rwpend bench: error: --rt-priority must be in 0..99', file=sys.stderr)
-        return 2
-    cpu_latency = None if str(a.cpu_latency).lower() == 'none' else a.cpu_latency
+    if not a.no_realtime:
+        for layout in st.layouts:
+            for h in st.periods:
+                say(f'rwpend bench: real time, {layout}, h = {h * 1e3:g} ms, {st.duration:g} s ...')
+                res['realtime'].append(run_realtime(out, h, st.duration, layout, env, a.ns, echo,
+                                                    base=replace(st.base, pins=parse_pins(st.pins.get(layout, ())))))
+        if not a.no_rig:
+            for h in st.periods:
+                say(f'rwpend bench: real time, the rig through the emulator, h = {h * 1e3:g} ms, '
+                    f'{st.duration:g} s ...')
+                res['realtime'].append(run_rig(out, h, st.duration, env, a.ns, echo, base=st.base,
+                                               rt_priority=a.rt_priority))
+    if not a.no_lockstep:
+        for layout in st.layouts:
+            for record in (False, True):
+                say(f'rwpend bench: lockstep, {layout}, {st.ls_dur:g} s simulated, '
+                    f'recorder {"on" if record else "off"} ...')
+                res['lockstep'].append(run_lockstep(out, st.periods[0], st.ls_dur, layout, record, env,
+                                                    a.ns, echo, base=st.base))
+    if not a.no_scale and a.scale_max >= 1:
+        sdur = a.scale_duration if a.scale_duration is not None else (8.0 if a.quick else 20.0)
+        res['settings'].update({'scale_duration_s': sdur, 'scale_max': a.scale_max,
+                                'scale_layout': a.scale_layout})
+        # no pinning: n rigs share the CPUs as the scheduler places them
+        res['scale'] = run_scale(out, st.periods[0], sdur, a.scale_max, env, a.scale_layout, echo,
+                                 base=st.base, say=say)
+    if not a.no_sweep:
+        say('rwpend bench: robustness-study speed (./rwpend sweep, pure core) ...')
+        from rwpend_sweep.bench import bench as sweep_bench
+        res['sweep'] = sweep_bench()
+    if not a.no_decode:
+        bags = [Path(r['bag']) for r in res['realtime'] + res['lockstep']
+                if r.get('bag') and Path(r['bag']).is_dir()]
+        if bags:
+            biggest = max(bags, key=lambda b: sum(f.stat().st_size for f in b.iterdir()))
+            say(f'rwpend bench: decoding {biggest} ...')
+            res['decode'] = run_decode(biggest)
+
+
+def main(argv=None) -> int:
+    p = _parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    a = p.parse_args(argv)
+    from rwpend_bringup.cli import ROOT
     try:
-        if cpu_latency is not None:
-            if not str(cpu_latency).strip().isdigit():
-                raise ValueError(f'--cpu-latency expects microseconds (an integer >= 0) or none, got {cpu_latency!r}')
-            cpu_latency = int(cpu_latency)
-        base = Stack(rt_priority=a.rt_priority, overrides=overrides_from(a.set), cpu_latency=cpu_latency)
-        _plan(base)      # refuse a bad --set before any run
-        pins = realtime_pins(a.pin, layouts)
+        st = settings(a)
     except ValueError as exc:
         print(f'rwpend bench: error: {exc}', file=sys.stderr)
         return 2
+    out = Path(a.out) if a.out else ROOT / 'bench_out'
+    out.mkdir(parents=True, exist_ok=True)
+    env = _environment(a)
     res = {'started': time.time(), 'machine': machine_info(),
-           'settings': {'duration_s': duration, 'lockstep_duration_s': ls_dur, 'periods_s': list(periods),
-                        'layouts': list(layouts), 'domain_id': int(env['ROS_DOMAIN_ID']),
+           'settings': {'duration_s': st.duration, 'lockstep_duration_s': st.ls_dur, 'periods_s': list(st.periods),
+                        'layouts': list(st.layouts), 'domain_id': int(env['ROS_DOMAIN_ID']),
                         'namespace': a.ns, 'quick': a.quick, 'rt_priority': a.rt_priority,
-                        'set': list(a.set), 'pin_realtime': {k: list(v) for k, v in pins.items()},
-                        'cpu_latency_us': None if cpu_latency is None else int(cpu_latency),
-                        'command': 'rwpend bench ' + ' '.join(sys.argv[1:] if argv is None else argv)},
+                        'set': list(a.set), 'pin_realtime': {k: list(v) for k, v in st.pins.items()},
+                        'cpu_latency_us': st.cpu_latency, 'command': 'rwpend bench ' + ' '.join(argv)},
            'realtime': [], 'lockstep': [], 'decode': None, 'scale': None, 'sweep': None}
-    say = (lambda s: print(s, file=sys.stderr, flush=True))
     try:
-        if not a.no_realtime:
-            for layout in layouts:
-                for h in periods:
-                    say(f'rwpend bench: real time, {layout}, h = {h * 1e3:g} ms, {duration:g} s ...')
-                    r = run_realtime(out, h, duration, layout, env, a.ns, echo,
-                                     base=replace(base, pins=parse_pins(pins.get(layout, ()))))
-                    res['realtime'].append(r)
-            if not a.no_rig:
-                for h in periods:
-                    say(f'rwpend bench: real time, the rig through the emulator, h = {h * 1e3:g} ms, '
-                        f'{duration:g} s ...')
-                    res['realtime'].append(run_rig(out, h, duration, env, a.ns, echo, base=base,
-                                                   rt_priority=a.rt_priority))
-        if not a.no_lockstep:
-            for layout in layouts:
-                for record in (False, True):
-                    say(f'rwpend bench: lockstep, {layout}, {ls_dur:g} s simulated, '
-                        f'recorder {"on" if record else "off"} ...')
-                    res['lockstep'].append(run_lockstep(out, periods[0], ls_dur, layout, record, env,
-                                                        a.ns, echo, base=base))
-        if not a.no_scale and a.scale_max >= 1:
-            sdur = a.scale_duration if a.scale_duration is not None else (8.0 if a.quick else 20.0)
-            res['settings'].update({'scale_duration_s': sdur, 'scale_max': a.scale_max,
-                                    'scale_layout': a.scale_layout})
-            # no pinning: n rigs share the CPUs as the scheduler places them
-            res['scale'] = run_scale(out, periods[0], sdur, a.scale_max, env, a.scale_layout, echo,
-                                     base=base, say=say)
-        if not a.no_sweep:
-            say('rwpend bench: robustness-study speed (./rwpend sweep, pure core) ...')
-            from rwpend_sweep.bench import bench as sweep_bench
-            res['sweep'] = sweep_bench()
-        if not a.no_decode:
-            bags = [Path(r['bag']) for r in res['realtime'] + res['lockstep']
-                    if r.get('bag') and Path(r['bag']).is_dir()]
-            if bags:
-                biggest = max(bags, key=lambda b: sum(f.stat().st_size for f in b.iterdir()))
-                say(f'rwpend bench: decoding {biggest} ...')
-                res['decode'] = run_decode(biggest)
+        _run_all(a, st, out, env, res, say=lambda s: print(s, file=sys.stderr, flush=True))
     except KeyboardInterrupt:
         res['interrupted'] = True
     finally:

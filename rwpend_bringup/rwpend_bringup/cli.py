@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -277,6 +276,52 @@ Examples:
   ./rwpend node estimator --ns /offline -p estimator:=observer3"""
 
 
+def parse_node_args(ours: list[str], ros: list[str]) -> tuple[dict, list[str], str | None, list[str]]:
+    """``rwpend node`` arguments before ``--ros-args`` (``ours``) and after (``ros``) ->
+    (-p overrides, --params files, --ns or None, the other ROS arguments); ValueError with the
+    reason."""
+    import yaml
+    overrides: dict = {}
+    files: list[str] = []
+    ns = None
+    rest_ros: list[str] = []
+    i = 0
+    items = [('ours', x) for x in ours] + [('ros', x) for x in ros]
+    while i < len(items):
+        kind, x = items[i]
+        nxt = items[i + 1][1] if i + 1 < len(items) else None
+        if x in ('-p', '--param'):
+            if nxt is None or ':=' not in nxt:
+                raise ValueError(f'{x} expects NAME:=VALUE, got {nxt!r}')
+            key, val = nxt.split(':=', 1)
+            if not key:
+                raise ValueError(f'{x} expects NAME:=VALUE, got {nxt!r}')
+            try:
+                overrides[key] = yaml.safe_load(val) if val != '' else ''
+            except yaml.YAMLError:
+                overrides[key] = val
+            i += 2
+        elif kind == 'ours' and x == '--params':
+            if nxt is None or not Path(nxt).is_file():
+                raise ValueError(f'--params: no such file {nxt!r}')
+            files.append(str(Path(nxt).resolve()))
+            i += 2
+        elif kind == 'ours' and x == '--ns':
+            if nxt is None:
+                raise ValueError('--ns expects a namespace')
+            try:
+                ns = namespace_arg(nxt)
+            except (argparse.ArgumentTypeError, ValueError) as exc:
+                raise ValueError(str(exc)) from None
+            i += 2
+        elif kind == 'ours':
+            raise ValueError(f'unknown argument {x!r} (ROS arguments go after --ros-args)')
+        else:
+            rest_ros.append(x)
+            i += 1
+    return overrides, files, ns, rest_ros
+
+
 def node_main(argv, name: str | None = None) -> int:
     """One node process. -p overrides are written to a last params file: rclpy ranks a file's
     `/**/node` section above a command-line -p, so a plain -p would lose to stack.yaml."""
@@ -298,44 +343,10 @@ def node_main(argv, name: str | None = None) -> int:
     if any(x in ('-h', '--help') for x in ours):
         print(usage)
         return 0
-    overrides: dict = {}
-    files: list[str] = []
-    ns = None
-    rest_ros: list[str] = []
-    i = 0
-    items = [('ours', x) for x in ours] + [('ros', x) for x in ros]
-    while i < len(items):
-        kind, x = items[i]
-        nxt = items[i + 1][1] if i + 1 < len(items) else None
-        if x in ('-p', '--param'):
-            if nxt is None or ':=' not in nxt:
-                return fail(prog, f'{x} expects NAME:=VALUE, got {nxt!r}')
-            key, val = nxt.split(':=', 1)
-            if not key:
-                return fail(prog, f'{x} expects NAME:=VALUE, got {nxt!r}')
-            try:
-                overrides[key] = yaml.safe_load(val) if val != '' else ''
-            except yaml.YAMLError:
-                overrides[key] = val
-            i += 2
-        elif kind == 'ours' and x == '--params':
-            if nxt is None or not Path(nxt).is_file():
-                return fail(prog, f'--params: no such file {nxt!r}')
-            files.append(str(Path(nxt).resolve()))
-            i += 2
-        elif kind == 'ours' and x == '--ns':
-            if nxt is None:
-                return fail(prog, '--ns expects a namespace')
-            try:
-                ns = namespace_arg(nxt)
-            except (argparse.ArgumentTypeError, ValueError) as exc:
-                return fail(prog, str(exc))
-            i += 2
-        elif kind == 'ours':
-            return fail(prog, f'unknown argument {x!r} (ROS arguments go after --ros-args)')
-        else:
-            rest_ros.append(x)
-            i += 1
+    try:
+        overrides, files, ns, rest_ros = parse_node_args(ours, ros)
+    except ValueError as exc:
+        return fail(prog, str(exc))
     for f in files:
         from rwpend_model.rig import read_params_file
         try:
