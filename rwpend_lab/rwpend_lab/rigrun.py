@@ -116,12 +116,11 @@ class Monitor:
         return '; '.join(short)
 
     def _run(self) -> None:
-        from rcl_interfaces.msg import Parameter
         from rcl_interfaces.srv import SetParameters
-        from rwpend_ros.tools import RosTool, to_parameter_value
         from rwpend_msgs.msg import EncoderCounts, MotorCommand
         from rwpend_ros.qos import QOS_CONTROL
         from rwpend_ros.runner import make_executor
+        from rwpend_ros.tools import RosTool
         if self.rt_priority > 0:
             # below the loop (its processes run at rt_priority), above ordinary load: a monitor that
             # falls behind the samples shows the prompts late and arms the controller late; set
@@ -142,61 +141,7 @@ class Monitor:
                 executor = make_executor()
                 executor.add_node(node)
                 self.ready.set()
-                started = time.monotonic()
-                future, request = None, None     # the arming call in flight
-                arming = self.arming
-                while not self.stop.is_set() and not self.done.is_set():
-                    executor.spin_once(timeout_sec=0.05)
-                    if not self.listening:
-                        missing = self._not_recorded(node, tool)
-                        self.listening = not missing
-                        if missing and time.monotonic() - started > START_S:
-                            self.error = (f'the stack was not ready within {START_S:g} s: {missing} (see the '
-                                          f'log of the run)')
-                            self.done.set()
-                    elif self.samples == 0 and time.monotonic() - started > START_S:
-                        self.error = (f'no encoder sample from the driver within {START_S:g} s (is the rig '
-                                      f'connected and powered? the driver\'s log says why)')
-                        self.done.set()
-                    if future is not None and not future.done() and arming.unanswered(time.monotonic()):
-                        future = setter.call_async(request)
-                    if future is not None and future.done():
-                        result = future.result()
-                        ok = bool(result is not None and result.results and result.results[0].successful)
-                        why = result.results[0].reason if result is not None and result.results else 'no answer'
-                        answer = arming.answered(ok, why, self.mode, time.monotonic())
-                        future = None
-                        if answer == 'again':
-                            time.sleep(arming.retry_pause_s)
-                            future = setter.call_async(request)
-                            continue
-                        if answer == 'refused':
-                            self.error = arming.error
-                            self.done.set()
-                        else:
-                            self.log(f'          controller: mode {self.mode} (sample {arming.armed_seq})')
-                    if arming.over(time.monotonic(), self.command_seq, self.steps.end):
-                        self.done.set()
-                    while not self.events.empty():
-                        ev = self.events.get_nowait()
-                        if ev.kind == 'show':
-                            self.log(f'      >>> {ev.text}')
-                        elif ev.kind == 'detected':
-                            self.log(f'          seen (sample {ev.seq})')
-                        elif ev.kind == 'arm':
-                            if not setter.service_is_ready():
-                                self.error = f'{tool.fqn("controller")}/set_parameters is not available'
-                                self.done.set()
-                                break
-                            request = SetParameters.Request(parameters=[
-                                Parameter(name='mode', value=to_parameter_value(self.mode))])
-                            arming.ask(ev.seq, time.monotonic())
-                            future = setter.call_async(request)
-                        elif ev.kind == 'timeout':
-                            self.error = ev.text
-                            self.done.set()
-                        elif ev.kind == 'done':
-                            arming.steps_done(time.monotonic())
+                self._watch(executor, tool, setter)
                 executor.remove_node(node)
                 executor.shutdown(timeout_sec=1.0)
         except Exception as exc:  # noqa: BLE001 - said to the runner, which stops the stack
@@ -204,6 +149,83 @@ class Monitor:
             self.done.set()
         finally:
             self.ready.set()
+
+    def _watch(self, executor, tool, setter) -> None:
+        """Until the run is over or stopped: spin, check the start, carry the arming call (asked,
+        re-asked while unanswered, answered), and act on the steps' events."""
+        started = time.monotonic()
+        self._call, self._request = None, None      # the arming call in flight, and its request
+        arming = self.arming
+        while not self.stop.is_set() and not self.done.is_set():
+            executor.spin_once(timeout_sec=0.05)
+            self._check_start(tool, started)
+            if self._call is not None and not self._call.done() and arming.unanswered(time.monotonic()):
+                self._call = setter.call_async(self._request)
+            if self._call is not None and self._call.done() and self._arming_answered(setter):
+                continue
+            if arming.over(time.monotonic(), self.command_seq, self.steps.end):
+                self.done.set()
+            self._take_events(tool, setter)
+
+    def _check_start(self, tool, started: float) -> None:
+        """An error when the stack is not listening, or no sample came, START_S s after the start."""
+        late = time.monotonic() - started > START_S
+        if not self.listening:
+            missing = self._not_recorded(tool.node, tool)
+            self.listening = not missing
+            if missing and late:
+                self.error = (f'the stack was not ready within {START_S:g} s: {missing} (see the '
+                              f'log of the run)')
+                self.done.set()
+        elif self.samples == 0 and late:
+            self.error = (f'no encoder sample from the driver within {START_S:g} s (is the rig '
+                          f'connected and powered? the driver\'s log says why)')
+            self.done.set()
+
+    def _arming_answered(self, setter) -> bool:
+        """The controller answered the arming call: armed, refused (an error) or to be asked
+        again (True: asked again after the retry pause)."""
+        result = self._call.result()
+        ok = bool(result is not None and result.results and result.results[0].successful)
+        why = result.results[0].reason if result is not None and result.results else 'no answer'
+        answer = self.arming.answered(ok, why, self.mode, time.monotonic())
+        self._call = None
+        if answer == 'again':
+            time.sleep(self.arming.retry_pause_s)
+            self._call = setter.call_async(self._request)
+            return True
+        if answer == 'refused':
+            self.error = self.arming.error
+            self.done.set()
+        else:
+            self.log(f'          controller: mode {self.mode} (sample {self.arming.armed_seq})')
+        return False
+
+    def _take_events(self, tool, setter) -> None:
+        """The steps' events: prompts shown, steps seen, the controller armed, a timeout, the end."""
+        from rcl_interfaces.msg import Parameter
+        from rcl_interfaces.srv import SetParameters
+        from rwpend_ros.tools import to_parameter_value
+        while not self.events.empty():
+            ev = self.events.get_nowait()
+            if ev.kind == 'show':
+                self.log(f'      >>> {ev.text}')
+            elif ev.kind == 'detected':
+                self.log(f'          seen (sample {ev.seq})')
+            elif ev.kind == 'arm':
+                if not setter.service_is_ready():
+                    self.error = f'{tool.fqn("controller")}/set_parameters is not available'
+                    self.done.set()
+                    return
+                self._request = SetParameters.Request(parameters=[
+                    Parameter(name='mode', value=to_parameter_value(self.mode))])
+                self.arming.ask(ev.seq, time.monotonic())
+                self._call = setter.call_async(self._request)
+            elif ev.kind == 'timeout':
+                self.error = ev.text
+                self.done.set()
+            elif ev.kind == 'done':
+                self.arming.steps_done(time.monotonic())
 
 
 def armed_origin(d, arm_seq: int, mode: str) -> int:
