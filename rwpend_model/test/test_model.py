@@ -180,3 +180,20 @@ def test_a_hand_holds_the_pendulum_and_lets_go():
     assert p.state.theta < 0.35, 'released: it swings'
     with pytest.raises(ValueError):
         p.hold(float('nan'))
+
+
+@pytest.mark.parametrize('back_emf', [True, False])
+def test_free_motion_derivative_is_the_models_bit_for_bit(back_emf):
+    """Plant._free_deriv (the integrator's fast path) gives exactly what _deriv gives for a
+    rotor that turns freely, disturbance included."""
+    import random
+    p = Plant(load_rig(), back_emf=back_emf)
+    p.disturbance = 0.37
+    d = p._free_deriv()
+    rnd = random.Random(3)
+    for _ in range(2000):
+        th, thd, thrd, tau = (rnd.uniform(-7, 7), rnd.uniform(-30, 30), rnd.uniform(-400, 400),
+                              rnd.uniform(-12, 12))
+        if rnd.random() < 0.05:
+            thrd = thd          # zero relative speed: no kinetic friction
+        assert d(th, thd, thrd, tau) == p._deriv(th, thd, thrd, tau, False)[:2]
