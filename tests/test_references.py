@@ -45,8 +45,11 @@ GIT_SHOW_RE = re.compile(r'git show ([0-9a-f]{7,40}):([\w./-]+)')
 
 @lru_cache(maxsize=None)
 def _tracked_top() -> frozenset[str]:
+    """The repository's top-level entries: not hidden, not what builds and runs make (outputs,
+    Python's bytecode cache)."""
     return frozenset({p.name for p in ROOT.iterdir()
-            if not p.name.startswith('.') and p.name not in GENERATED and not p.name.endswith('_out')})
+            if not p.name.startswith('.') and p.name not in GENERATED | {'__pycache__'}
+            and not p.name.endswith('_out')})
 
 
 def documents() -> list[Path]:
