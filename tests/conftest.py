@@ -33,9 +33,9 @@ def ros_env():
 
 @pytest.fixture
 def netlab(tmp_path):
-    """Test hosts in network namespaces (rwpend_bench.netlab), deleted at the end of the test;
+    """Test hosts in network namespaces (tests/support/netlab.py), deleted at the end of the test;
     the test is skipped, with the reason, where they cannot be made (not root, no ip(8))."""
-    from rwpend_bench.netlab import NetLab, why_not_available
+    from support.netlab import NetLab, why_not_available
     reason = why_not_available()
     if reason is not None:
         pytest.skip(f'no test hosts in network namespaces: {reason}')
@@ -49,5 +49,5 @@ def netlab(tmp_path):
 @pytest.fixture
 def lab_env():
     """Environment of processes on the test hosts: a test domain id, discovery on the subnet."""
-    from rwpend_bench.netrun import lab_env as make
+    from support.netrun import lab_env as make
     return make(test_domain_id())

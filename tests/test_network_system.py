@@ -1,7 +1,7 @@
 """The lab network, tested (issue 22): the stack split across hosts of a lab subnet, many rigs
 on one network, one controller per rig -- with test hosts in network namespaces joined by a
-switch (rwpend_bench.netlab), ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``, each host running
-``./rwpend up`` with the same arguments and its own ``--only`` (rwpend_bench.netrun).
+switch (tests/support/netlab.py), ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``, each host running
+``./rwpend up`` with the same arguments and its own ``--only`` (tests/support/netrun.py).
 
 Skipped, with the reason, where the namespaces cannot be made (not root). Nothing here asserts
 timing: the latency and late fractions across the link are printed (``pytest -s``; the figures
@@ -22,7 +22,7 @@ import pytest
 
 from rwpend_bag.judge import judge, read_run
 from rwpend_bag.reader import read_bag
-from rwpend_bench.netrun import SplitRun
+from support.netrun import SplitRun
 from rwpend_ros import wire
 
 pytestmark = pytest.mark.network
@@ -211,7 +211,7 @@ def test_delay_and_loss_are_reported_and_never_unsafe(tmp_path, netlab, lab_env)
     0 ms, 1 ms, 1 % loss, 5 ms each way, then 0 ms again. Printed per stretch: late share,
     share at zero by the timeout, share upright. Asserted: no sample driven by a stale
     command, ever (5 ms each way makes every command 10+ samples old: the plant refuses them)."""
-    from rwpend_bench.netlab import ensure_nft
+    from support.netlab import ensure_nft
     reason = ensure_nft()
     if reason is not None:
         pytest.skip(f'no packet loss without nftables: {reason}')
@@ -254,7 +254,7 @@ def start_rigs(netlab, tmp_path, rigs, duration: float = 300.0):
     """Each rig (namespace, domain id, initial theta): its simulator on host A, its estimator +
     controller on B, its recorder on C, until stopped (``duration`` is a bound). Returns
     (hosts, {ns: (run, env, bag)})."""
-    from rwpend_bench.netrun import lab_env
+    from support.netrun import lab_env
     a, b, c, placement = split_three(netlab)
     out = {}
     for ns, domain, theta0 in rigs:

@@ -1,12 +1,12 @@
-"""The test network's pure parts: the delay line's checksums (rwpend_bench.delayline) and
-the refusals of rwpend_bench.netlab."""
+"""The test network's pure parts: the delay line's checksums (tests/support/delayline.py) and
+the refusals of tests/support/netlab.py."""
 from __future__ import annotations
 
 import struct
 
 import pytest
 
-from rwpend_bench import delayline, netlab
+from support import delayline, netlab
 
 
 def udp_frame(payload: bytes, checksum: int = 0) -> bytes:

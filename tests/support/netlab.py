@@ -13,7 +13,7 @@ Faults of a host's link, at the switch (the cable between the host and the switc
 * :meth:`NetLab.set_loss` -- random loss of the host's UDP datagrams, both ways, with nftables
   (``numgen random``) in the host's namespace; needs the ``nft`` tool;
 * delay -- this kernel has no ``netem`` qdisc, so a host made with ``delay_ms`` is wired to its
-  switch port through :mod:`rwpend_bench.delayline`, a userspace delay line that holds every
+  switch port through :mod:`support.delayline` (tests/support/delayline.py), a userspace delay line that holds every
   Ethernet frame for the delay, both ways (:meth:`NetLab.set_delay` changes it while it runs).
 
 Every name the lab creates starts with its ``prefix`` (``rwl<pid>x<random>``), so labs of
@@ -160,7 +160,7 @@ class NetLab:
 
     def _start_delayline(self, host: Host, inner: str) -> subprocess.Popen:
         report = self._log_path(f'delayline_{host.name}.json')
-        cmd = ['ip', 'netns', 'exec', self.switch, sys.executable, '-m', 'rwpend_bench.delayline',
+        cmd = ['ip', 'netns', 'exec', self.switch, sys.executable, str(Path(__file__).with_name('delayline.py')),
                host.port, inner, '--delay-ms', repr(float(host.delay_ms))]
         if report is not None:
             cmd += ['--report', str(report)]

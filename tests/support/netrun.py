@@ -1,4 +1,4 @@
-"""The stack split across the hosts of a lab network (:mod:`rwpend_bench.netlab`): each host
+"""The stack split across the hosts of a lab network (:mod:`tests/support/netlab.py`): each host
 runs ``./rwpend up`` with the same arguments and its own ``--only``, as a lab would (the rig PC
 ``--only sim``, a student's laptop ``--only control``, a console ``--only recorder``). Used by the
 network tests (tests/test_network_system.py). Pure Python (subprocess), no rclpy.

@@ -7,7 +7,7 @@ import subprocess
 
 import pytest
 
-from rwpend_bench.netlab import ensure_nft
+from support.netlab import ensure_nft
 from rwpend_bench.soak import drop_rule
 
 

@@ -3,9 +3,9 @@ out of the other ``delay`` ms later, in order. For test networks on a kernel wit
 ``netem`` qdisc (the project's machines: ``tc qdisc add ... netem`` fails with "Specified qdisc
 kind is unknown"), where no kernel mechanism delays packets by a fixed time.
 
-    python -m rwpend_bench.delayline IF_A IF_B --delay-ms 5 [--report FILE]
+    python tests/support/delayline.py IF_A IF_B --delay-ms 5 [--report FILE]
 
-Run it as root in the namespace that holds both interfaces (``rwpend_bench.netlab`` does). It
+Run it as root in the namespace that holds both interfaces (``tests/support/netlab.py`` does). It
 reads frames with AF_PACKET sockets and writes them to the other interface; it prints ``ready``
 once both sockets are bound. A line ``delay MS`` on its standard input changes the delay (frames
 already held keep theirs: the order of the frames never changes); the end of its input,
@@ -216,7 +216,7 @@ def run(if_a: str, if_b: str, delay_ms: float, report_path: str | None, priority
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog='python -m rwpend_bench.delayline', description=__doc__.split('\n\n')[0])
+    p = argparse.ArgumentParser(prog="delayline.py", description=__doc__.split('\n\n')[0])
     p.add_argument('if_a')
     p.add_argument('if_b')
     p.add_argument('--delay-ms', type=float, default=0.0)
