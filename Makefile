@@ -19,6 +19,11 @@ demo: setup
 test: setup-browser setup-cluster
 	@./rwpend exec python -m pytest
 
+# the tiers (pytest markers, given by the root conftest.py): unit, loop, system, network, browser
+# the quick check: pure code and the loop in one process, no process of the stack started
+test-fast: setup
+	@./rwpend exec python -m pytest -m "unit or loop"
+
 test-unit: setup
 	@./rwpend exec python -m pytest -m "not system"
 

@@ -13,13 +13,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PY = str(ROOT / '.venv' / 'bin' / 'python') if (ROOT / '.venv' / 'bin' / 'python').exists() else sys.executable
 
 
-def pytest_collection_modifyitems(config, items):
-    """Every test under tests/ starts processes: mark it `system`."""
-    for item in items:
-        if Path(str(item.fspath)).resolve().parent == Path(__file__).resolve().parent:
-            item.add_marker(pytest.mark.system)
-
-
 @pytest.fixture
 def ros_env():
     """Environment for node processes: own ROS_DOMAIN_ID (100-230), discovery on localhost only."""

@@ -13,6 +13,8 @@ from rwpend_lab.experiment import Options
 from rwpend_lab.registry import EXPERIMENTS
 from rwpend_model.rig import load_rig
 
+pytestmark = pytest.mark.loop    # the twin: the stack's loop in lockstep in the test's process
+
 RIG = load_rig()
 _CACHE: dict = {}
 

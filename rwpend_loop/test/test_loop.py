@@ -17,6 +17,8 @@ from rwpend_loop.loop import (ControllerStage, EstimatorStage, Loop,
                               run_lockstep)
 from rwpend_loop.pacer import Pacer
 
+pytestmark = pytest.mark.loop    # the loop in lockstep in the test's process
+
 ID = 0x1234
 
 

@@ -9,6 +9,7 @@ from rwpend_sweep.spec import study_from_dict
 from rwpend_sweep.study import run_study
 
 distributed = pytest.importorskip('distributed')
+pytestmark = pytest.mark.loop    # each run is the stack's loop in lockstep (in the workers)
 
 DOC = {'scenario': {'mode': 'auto', 'duration': 0.5, 'success': {'last': 0.2}},
        'axes': {'initial.theta_dot': [-1.0, 0.0, 1.0], 'plant.m_r': {'uniform': [0.08, 0.09]},

@@ -12,6 +12,8 @@ from rwpend_sweep.run import run_one, samples_of
 from rwpend_sweep.spec import study_from_dict
 from rwpend_sweep.study import run_study
 
+pytestmark = pytest.mark.loop    # each run is the stack's loop in lockstep
+
 DOC = {'scenario': {'mode': 'auto', 'duration': 0.6, 'success': {'last': 0.3}},
        'axes': {'initial.theta': [3.1, 3.3], 'plant.m_p': {'factor': [0.9, 1.1]},
                 'sensor.noise_counts': [0.0, 1.0]},
