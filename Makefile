@@ -1,5 +1,5 @@
 # rwpend — two commands on a fresh Debian 12 machine: `make demo` and `make test`.
-.PHONY: setup setup-browser setup-cluster demo test test-unit test-system test-network bench soak lab firmware clean distclean
+.PHONY: setup setup-browser setup-cluster demo test test-fast test-unit test-loop test-system test-network test-browser bench soak lab firmware clean distclean
 
 PY := .venv/bin/python
 
@@ -25,14 +25,21 @@ test-fast: setup
 	@./rwpend exec python -m pytest -m "unit or loop"
 
 test-unit: setup
-	@./rwpend exec python -m pytest -m "not system"
+	@./rwpend exec python -m pytest -m unit
 
-test-system: setup-browser
+test-loop: setup
+	@./rwpend exec python -m pytest -m loop
+
+test-system: setup
 	@./rwpend exec python -m pytest -m system
 
 # the lab network tests alone (test hosts in network namespaces: root; part of make test too)
 test-network: setup
 	@./rwpend exec python -m pytest -m network
+
+# the console's page tests in chromium (part of make test too)
+test-browser: setup-browser
+	@./rwpend exec python -m pytest -m browser
 
 bench: setup
 	@./rwpend bench
