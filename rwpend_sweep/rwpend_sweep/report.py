@@ -161,79 +161,102 @@ def plots(study: Study, rows: list[dict], out: Path) -> list[tuple[str, str]]:
     ok = _success(rows)
     axes = list(study.axes)
     if len(axes) >= 2:
-        a1, a2 = axes[0], axes[1]
-        fig, ax = plt.subplots(figsize=(7, 5.5))
-        (v1, l1), (v2, l2) = _axis(rows, a1.name), _axis(rows, a2.name)
-        if a1.is_grid and a2.is_grid and np.all(np.isfinite(v1)) and np.all(np.isfinite(v2)):
-            xs, ys = sorted(set(v1)), sorted(set(v2))
-            rate = np.full((len(ys), len(xs)), np.nan)
-            for ix, xv in enumerate(xs):
-                for iy, yv in enumerate(ys):
-                    m = (v1 == xv) & (v2 == yv)
-                    if m.any():
-                        rate[iy, ix] = ok[m].mean()
-            ext = _extent(xs, ys)
-            im = ax.imshow(rate, origin='lower', aspect='auto', extent=ext, cmap='RdYlGn', vmin=0, vmax=1,
-                           interpolation='nearest')
-            fig.colorbar(im, ax=ax, label='success rate')
-        else:
-            ax.scatter(v1[~ok], v2[~ok], s=8, c='tab:red', label='failed')
-            ax.scatter(v1[ok], v2[ok], s=8, c='tab:green', label='succeeded')
-            ax.legend(loc='best')
-        if a1.name == 'initial.theta' and a2.name == 'initial.theta_dot':
-            _draw_band(ax, v1)
-        if l1:
-            ax.set_xticks(range(len(l1)), l1)
-        if l2:
-            ax.set_yticks(range(len(l2)), l2)
-        ax.set_xlabel(a1.name)
-        ax.set_ylabel(a2.name)
-        ax.set_title(f'success over {a1.name} x {a2.name}')
-        fig.tight_layout()
-        fig.savefig(out / 'success_map.png', dpi=110)
-        plt.close(fig)
-        made.append(('success_map.png', f'Success over {a1.name} x {a2.name}'
-                     + (' with the band (6.6) of the catch' if a1.name == 'initial.theta' and
-                        a2.name == 'initial.theta_dot' else '')))
+        made.append(_success_map(plt, rows, ok, axes[0], axes[1], out))
     for a in axes:
-        v, labels = _axis(rows, a.name)
-        if not np.any(np.isfinite(v)):
-            continue
+        made += _axis_plots(plt, rows, ok, a, out)
+    made += _metric_histograms(plt, rows, out)
+    return made
+
+
+def _success_map(plt, rows: list[dict], ok: np.ndarray, a1, a2, out: Path) -> tuple[str, str]:
+    """The success map over axes ``a1`` x ``a2`` (a grid: each cell's success rate; else a
+    scatter of the runs; the band (6.6) over ``initial.theta`` x ``initial.theta_dot``):
+    success_map.png in ``out`` (name, caption)."""
+    fig, ax = plt.subplots(figsize=(7, 5.5))
+    (v1, l1), (v2, l2) = _axis(rows, a1.name), _axis(rows, a2.name)
+    if a1.is_grid and a2.is_grid and np.all(np.isfinite(v1)) and np.all(np.isfinite(v2)):
+        xs, ys = sorted(set(v1)), sorted(set(v2))
+        rate = np.full((len(ys), len(xs)), np.nan)
+        for ix, xv in enumerate(xs):
+            for iy, yv in enumerate(ys):
+                m = (v1 == xv) & (v2 == yv)
+                if m.any():
+                    rate[iy, ix] = ok[m].mean()
+        ext = _extent(xs, ys)
+        im = ax.imshow(rate, origin='lower', aspect='auto', extent=ext, cmap='RdYlGn', vmin=0, vmax=1,
+                       interpolation='nearest')
+        fig.colorbar(im, ax=ax, label='success rate')
+    else:
+        ax.scatter(v1[~ok], v2[~ok], s=8, c='tab:red', label='failed')
+        ax.scatter(v1[ok], v2[ok], s=8, c='tab:green', label='succeeded')
+        ax.legend(loc='best')
+    if a1.name == 'initial.theta' and a2.name == 'initial.theta_dot':
+        _draw_band(ax, v1)
+    if l1:
+        ax.set_xticks(range(len(l1)), l1)
+    if l2:
+        ax.set_yticks(range(len(l2)), l2)
+    ax.set_xlabel(a1.name)
+    ax.set_ylabel(a2.name)
+    ax.set_title(f'success over {a1.name} x {a2.name}')
+    fig.tight_layout()
+    fig.savefig(out / 'success_map.png', dpi=110)
+    plt.close(fig)
+    return ('success_map.png', f'Success over {a1.name} x {a2.name}'
+            + (' with the band (6.6) of the catch' if a1.name == 'initial.theta' and
+               a2.name == 'initial.theta_dot' else ''))
+
+
+def _axis_plots(plt, rows: list[dict], ok: np.ndarray, a, out: Path) -> list[tuple[str, str]]:
+    """The success-rate curve over axis ``a`` (a grid: per value; a distribution: per decile)
+    and, for a distribution, its histogram of succeeded / failed runs: PNG files in ``out``
+    (name, caption); none when the axis has no number."""
+    made: list[tuple[str, str]] = []
+    v, labels = _axis(rows, a.name)
+    if not np.any(np.isfinite(v)):
+        return made
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    if a.is_grid:
+        xs = sorted(set(v[np.isfinite(v)]))
+        ys = [ok[v == x].mean() for x in xs]
+        ax.plot(xs, ys, 'o-')
+        if labels:
+            ax.set_xticks(range(len(labels)), labels)
+    else:
+        edges = np.unique(np.percentile(v, np.linspace(0, 100, 11)))
+        if edges.size >= 2:
+            idx = np.clip(np.digitize(v, edges[1:-1]), 0, edges.size - 2)
+            mids = 0.5 * (edges[1:] + edges[:-1])
+            ys = [ok[idx == k].mean() if np.any(idx == k) else np.nan for k in range(edges.size - 1)]
+            ax.plot(mids, ys, 'o-')
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_xlabel(a.name)
+    ax.set_ylabel('success rate')
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    name = f'rate_{_safe(a.name)}.png'
+    fig.savefig(out / name, dpi=100)
+    plt.close(fig)
+    made.append((name, f'Success rate over {a.name}' + ('' if a.is_grid else ' (per decile)')))
+    if not a.is_grid:
         fig, ax = plt.subplots(figsize=(6, 3.5))
-        if a.is_grid:
-            xs = sorted(set(v[np.isfinite(v)]))
-            ys = [ok[v == x].mean() for x in xs]
-            ax.plot(xs, ys, 'o-')
-            if labels:
-                ax.set_xticks(range(len(labels)), labels)
-        else:
-            edges = np.unique(np.percentile(v, np.linspace(0, 100, 11)))
-            if edges.size >= 2:
-                idx = np.clip(np.digitize(v, edges[1:-1]), 0, edges.size - 2)
-                mids = 0.5 * (edges[1:] + edges[:-1])
-                ys = [ok[idx == k].mean() if np.any(idx == k) else np.nan for k in range(edges.size - 1)]
-                ax.plot(mids, ys, 'o-')
-        ax.set_ylim(-0.05, 1.05)
+        ax.hist([v[ok], v[~ok]], bins=30, stacked=True, color=['tab:green', 'tab:red'],
+                label=['succeeded', 'failed'])
         ax.set_xlabel(a.name)
-        ax.set_ylabel('success rate')
-        ax.grid(alpha=0.3)
+        ax.set_ylabel('runs')
+        ax.legend()
         fig.tight_layout()
-        name = f'rate_{_safe(a.name)}.png'
+        name = f'hist_{_safe(a.name)}.png'
         fig.savefig(out / name, dpi=100)
         plt.close(fig)
-        made.append((name, f'Success rate over {a.name}' + ('' if a.is_grid else ' (per decile)')))
-        if not a.is_grid:
-            fig, ax = plt.subplots(figsize=(6, 3.5))
-            ax.hist([v[ok], v[~ok]], bins=30, stacked=True, color=['tab:green', 'tab:red'],
-                    label=['succeeded', 'failed'])
-            ax.set_xlabel(a.name)
-            ax.set_ylabel('runs')
-            ax.legend()
-            fig.tight_layout()
-            name = f'hist_{_safe(a.name)}.png'
-            fig.savefig(out / name, dpi=100)
-            plt.close(fig)
-            made.append((name, f'Histogram of {a.name} ({a.dist})'))
+        made.append((name, f'Histogram of {a.name} ({a.dist})'))
+    return made
+
+
+def _metric_histograms(plt, rows: list[dict], out: Path) -> list[tuple[str, str]]:
+    """Histograms of the time to balance and the largest wheel speed (where at least two runs
+    have one): PNG files in ``out`` (name, caption)."""
+    made: list[tuple[str, str]] = []
     for m, unit in (('time_to_balance', 's'), ('max_wheel_speed', 'rad/s')):
         v = _col(rows, m)
         v = v[np.isfinite(v)]
