@@ -110,6 +110,38 @@ PARAMS = [
 ]
 
 
+def checked_recorder_window(window: int) -> int:
+    """``lockstep_recorder_window`` as given, when it is 0 or in the allowed range."""
+    if not (window == 0 or RECORDER_WINDOW_MIN <= window <= RECORDER_WINDOW_MAX):
+        raise ConfigError(f'lockstep_recorder_window must be 0 or in {RECORDER_WINDOW_MIN}..'
+                          f'{RECORDER_WINDOW_MAX} (samples), got {window}')
+    return window
+
+
+def make_core(rig, p: dict) -> SimCore:
+    """The simulated plant of ``rig`` from the node's parameters ``p``: its initial state, the
+    effects modelled, the command timeout, the scripted taps and torques. A bad value is a
+    ConfigError."""
+    try:
+        core = SimCore(rig, command_timeout_samples=p['command_timeout_samples'],
+                       theta=p['initial.theta'], theta_dot=p['initial.theta_dot'],
+                       wheel_angle=p['initial.wheel_angle'], wheel_rate=p['initial.wheel_rate'],
+                       friction=p['friction'], motor_lag=p['motor_lag'], pwm=p['pwm'],
+                       back_emf=p['back_emf'], bracket=p['bracket'],
+                       rotor_locked=p['torque_meter'])
+        times, sizes = list(p['taps.times']), list(p['taps.sizes'])
+        if times == [-1.0]:
+            times, sizes = [], []
+        core.schedule_taps(times, sizes)
+        times, sizes, durs = (list(p[f'torques.{k}']) for k in ('times', 'sizes', 'durations'))
+        if times == [-1.0]:
+            times, sizes, durs = [], [], []
+        core.schedule_torques(times, sizes, durs)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(str(exc)) from exc
+    return core
+
+
 class SimNode(RwNode):
     #: the loop's process runs the samples (rwpend_loop.host): no timer of its own here
     #: (rwpend_ros.nodes.SlackTimer); :meth:`publish_sample` is called after each sample's
@@ -131,27 +163,8 @@ class SimNode(RwNode):
         #: where the truth differs from the model, for the start-up line and /diagnostics ('' = nowhere)
         self.truth_differs = format_differences(rig_differences(model, self.rig))
         p = self.param_table.declare(PARAMS)
-        window = p['lockstep_recorder_window']
-        if not (window == 0 or RECORDER_WINDOW_MIN <= window <= RECORDER_WINDOW_MAX):
-            raise ConfigError(f'lockstep_recorder_window must be 0 or in {RECORDER_WINDOW_MIN}..'
-                              f'{RECORDER_WINDOW_MAX} (samples), got {window}')
-        try:
-            self.core = SimCore(self.rig, command_timeout_samples=p['command_timeout_samples'],
-                                theta=p['initial.theta'], theta_dot=p['initial.theta_dot'],
-                                wheel_angle=p['initial.wheel_angle'], wheel_rate=p['initial.wheel_rate'],
-                                friction=p['friction'], motor_lag=p['motor_lag'], pwm=p['pwm'],
-                                back_emf=p['back_emf'], bracket=p['bracket'],
-                                rotor_locked=p['torque_meter'])
-            times, sizes = list(p['taps.times']), list(p['taps.sizes'])
-            if times == [-1.0]:
-                times, sizes = [], []
-            self.core.schedule_taps(times, sizes)
-            times, sizes, durs = (list(p[f'torques.{k}']) for k in ('times', 'sizes', 'durations'))
-            if times == [-1.0]:
-                times, sizes, durs = [], [], []
-            self.core.schedule_torques(times, sizes, durs)
-        except (ValueError, TypeError) as exc:
-            raise ConfigError(str(exc)) from exc
+        window = checked_recorder_window(p['lockstep_recorder_window'])
+        self.core = make_core(self.rig, p)
         self.p = p
         self.h = self.rig.sample_period
         self.period_ns = int(round(self.h * 1e9))
@@ -166,38 +179,8 @@ class SimNode(RwNode):
         self.hw = SimHardware(self.core)
         self.finished = False
 
-        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
-        self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL_PUB)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
-        # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
-        self.sub_cmd = (local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL,
-                                           sender=wire.command_sender)
-                        if external_command else None)
-        #: one controller at a time (rwpend_ros.claim)
-        try:
-            self.claim = CommandClaim(p['claim_timeout_samples'])
-        except ValueError as exc:
-            raise ConfigError(f'claim_timeout_samples {exc}') from exc
-        #: every command goes to the plant through the gate (claim, freshness, loop health)
-        self.gate = CommandGate(self.hw, self.claim, self.health)
-        estop_subscriptions(self, self.on_estop_topic)
-        #: the plant's e-stop as it is (latched): the controller and the console follow it
-        self.pub_estop_state = self.create_publisher(Bool, 'estop/state', QOS_LATCHED)
-        self.pub_estop_state.publish(Bool(data=False))
-        self.create_service(Disturb, 'sim/disturb', self.on_disturb)
-        self.create_service(SetBool, '~/estop', self.on_estop_service)
-        #: lockstep: samples this simulator may run ahead of the recorder (0: it does not wait)
-        self.recorder_window = int(window) if self.lockstep else 0
-        self.recorder_k = -1            # the newest sample the recorder reported (its /clock)
-        self.recorder_wall = 0.0        # wall time (monotonic) of its newest report
-        self.recorder_holds = 0         # samples that waited for the recorder
-        self.recorder_hold_s = 0.0      # wall seconds they waited
-        self.recorder_given_up = False  # the recorder stopped reporting: the run went on without it
-        self.malformed_progress = 0
-        if self.recorder_window:
-            self.create_subscription(Clock, 'recorder/progress', self.on_recorder_progress,
-                                     QOS_PROGRESS, raw=True)
+        self._create_interfaces(external_command)
+        self._init_recorder_wait(window)
 
         self.frame_id = p['frame_id']
         self.wall_start = time.monotonic()
@@ -212,6 +195,47 @@ class SimNode(RwNode):
                                f'a = {self.rig.a:.3f}, b_p = {self.rig.b_p:.4f}, b_r = {self.rig.b_r:.2f}; '
                                + (f'its truth differs from the rig YAML of the estimator and controller: '
                                   f'{self.truth_differs}' if self.truth_differs else 'truth = the rig YAML'))
+
+    def _create_interfaces(self, external_command: bool) -> None:
+        """The node's publishers, subscriptions and services, the command claim and the gate
+        every command goes through to the plant."""
+        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
+        self.pub_true = self.create_publisher(PlantState, 'sim/true_state', QOS_CONTROL_PUB)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
+        self.pub_clock = self.create_publisher(Clock, '/clock', QOS_CONTROL_PUB) if self.lockstep else None
+        # the per-sample path takes and publishes wire bytes (rwpend_ros.wire; PERFORMANCE.md)
+        self.sub_cmd = (local_subscription(self, MotorCommand, 'command', self.on_command, QOS_CONTROL,
+                                           sender=wire.command_sender)
+                        if external_command else None)
+        #: one controller at a time (rwpend_ros.claim)
+        try:
+            self.claim = CommandClaim(self.p['claim_timeout_samples'])
+        except ValueError as exc:
+            raise ConfigError(f'claim_timeout_samples {exc}') from exc
+        #: every command goes to the plant through the gate (claim, freshness, loop health)
+        self.gate = CommandGate(self.hw, self.claim, self.health)
+        estop_subscriptions(self, self.on_estop_topic)
+        #: the plant's e-stop as it is (latched): the controller and the console follow it
+        self.pub_estop_state = self.create_publisher(Bool, 'estop/state', QOS_LATCHED)
+        self.pub_estop_state.publish(Bool(data=False))
+        self.create_service(Disturb, 'sim/disturb', self.on_disturb)
+        self.create_service(SetBool, '~/estop', self.on_estop_service)
+
+    def _init_recorder_wait(self, window: int) -> None:
+        """Lockstep with a recorder outside: how far ahead of it the simulator may run
+        (``window`` samples) and the counts of its waits; the ``recorder/progress``
+        subscription where it waits."""
+        #: lockstep: samples this simulator may run ahead of the recorder (0: it does not wait)
+        self.recorder_window = int(window) if self.lockstep else 0
+        self.recorder_k = -1            # the newest sample the recorder reported (its /clock)
+        self.recorder_wall = 0.0        # wall time (monotonic) of its newest report
+        self.recorder_holds = 0         # samples that waited for the recorder
+        self.recorder_hold_s = 0.0      # wall seconds they waited
+        self.recorder_given_up = False  # the recorder stopped reporting: the run went on without it
+        self.malformed_progress = 0
+        if self.recorder_window:
+            self.create_subscription(Clock, 'recorder/progress', self.on_recorder_progress,
+                                     QOS_PROGRESS, raw=True)
 
     # ------------------------------------------------------------ callbacks
     def on_command(self, data: bytes) -> None:
