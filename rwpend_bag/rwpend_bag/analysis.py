@@ -130,10 +130,41 @@ def analyze(bag: Bag | str, series: dict | None = None) -> dict:
     i_up = _first_true(np.abs(err) < CATCH_WINDOW)
     m['swing_up_time_s'] = float(t[i_up]) if i_up is not None else None
 
-    # laws from the controller status (step-hold onto the state time base)
-    law_at = None
-    if 'status' in s:
-        cs = s['status']
+    laws, balanced = _law_metrics(s['status'] if 'status' in s else None, t, t0, err, i_up)
+    m.update(laws)
+    m.update(_balance_metrics(t, err, balanced))
+    m.update(_control_metrics(s, st))
+    wr = st.get('wheel_rate')
+    m['wheel_rate_range_rad_s'] = [float(wr.min()), float(wr.max())] if wr is not None and len(wr) else None
+
+    # wheel limit cycle over the longest balanced segment
+    m['limit_cycle'] = None
+    segs = _segments(balanced)
+    if segs:
+        a, b = max(segs, key=lambda ab: ab[1] - ab[0])
+        if 'wheel_angle' in st:
+            m['limit_cycle'] = limit_cycle(t[a:b], st['wheel_angle'][a:b])
+
+    m['estimator_gaps'] = estimator_gaps(s.get('state'))
+
+    # loop latency: not in a bag logged on the simulated clock (there both receive times are
+    # the sample's sim time)
+    m['loop_latency_ms'] = None
+    m['log_time'] = ((bag.metadata or {}).get('custom_data') or {}).get('rwpend.log_time', 'receive')
+    if 'command' in s and 'encoders' in s and m['log_time'] != 'sim':
+        m['loop_latency_ms'] = loop_latency(s['encoders'], s['command'])
+    return m
+
+
+def _law_metrics(cs: dict | None, t: np.ndarray, t0: int, err: np.ndarray,
+                 i_up: int | None) -> tuple[dict, np.ndarray]:
+    """The metrics of the controller's laws from its status ``cs`` (None: not in the bag) --
+    time to catch, mode switches, law changes seen, the laws -- and the mask of the samples
+    (times ``t`` from ``t0`` ns, angles ``err`` from upright) balanced: up under a balancing
+    law (step-hold of the status onto the state time base); without the status, up from the
+    first time up ``i_up`` on."""
+    m: dict = {}
+    if cs is not None:
         ts = (cs['_stamp_ns'] - t0) / 1e9
         laws = cs['law']
         i_catch = _first_true(np.isin(laws, BALANCE_LAWS))
@@ -152,9 +183,15 @@ def analyze(bag: Bag | str, series: dict | None = None) -> dict:
         balanced = np.zeros(len(t), bool)
         if i_up is not None:
             balanced[i_up:] = np.abs(err[i_up:]) < CATCH_WINDOW
+    return m, balanced
+
+
+def _balance_metrics(t: np.ndarray, err: np.ndarray, balanced: np.ndarray) -> dict:
+    """Time balanced and the RMS angle from upright while balanced: over every balanced sample,
+    and after the catch transients (samples balanced for >= SETTLE_S without interruption)."""
+    m: dict = {}
     m['balanced_time_s'] = float(np.sum(balanced) * np.median(np.diff(t))) if len(t) > 1 else 0.0
     m['balance_rms_rad'] = float(np.sqrt(np.mean(err[balanced] ** 2))) if balanced.any() else None
-    # the same after the catch transients: samples balanced for >= SETTLE_S without interruption
     settled = np.zeros(len(t), bool)
     if balanced.any() and len(t) > 1:
         idx = np.arange(len(t))
@@ -162,8 +199,13 @@ def analyze(bag: Bag | str, series: dict | None = None) -> dict:
         run = idx - np.maximum.accumulate(starts)
         settled = balanced & (run * np.median(np.diff(t)) >= SETTLE_S)
     m['balance_rms_settled_rad'] = float(np.sqrt(np.mean(err[settled] ** 2))) if settled.any() else None
+    return m
 
-    # control
+
+def _control_metrics(s: dict, st: dict) -> dict:
+    """RMS of the command and the fraction of samples at |u| = U_MAX, from the ``command``
+    topic, else the command the state message carries (None where neither is)."""
+    m: dict = {}
     if 'command' in s:
         u = s['command']['u']
     elif 'u_commanded' in st:
@@ -175,37 +217,24 @@ def analyze(bag: Bag | str, series: dict | None = None) -> dict:
         m['saturation_fraction'] = float(np.mean(np.abs(u) >= U_MAX - 1e-9))
     else:
         m['control_rms'] = m['saturation_fraction'] = None
-    wr = st.get('wheel_rate')
-    m['wheel_rate_range_rad_s'] = [float(wr.min()), float(wr.max())] if wr is not None and len(wr) else None
-
-    # wheel limit cycle over the longest balanced segment
-    m['limit_cycle'] = None
-    segs = _segments(balanced)
-    if segs:
-        a, b = max(segs, key=lambda ab: ab[1] - ab[0])
-        if 'wheel_angle' in st:
-            m['limit_cycle'] = limit_cycle(t[a:b], st['wheel_angle'][a:b])
-
-    m['estimator_gaps'] = estimator_gaps(s.get('state'))
-
-    # loop latency: command receive time - encoder receive time, same seq (not in a bag logged
-    # on the simulated clock: there both are the sample's sim time)
-    m['loop_latency_ms'] = None
-    m['log_time'] = ((bag.metadata or {}).get('custom_data') or {}).get('rwpend.log_time', 'receive')
-    if 'command' in s and 'encoders' in s and m['log_time'] != 'sim':
-        es, el = s['encoders']['seq'].astype(np.int64), s['encoders']['_log_ns']
-        cseq, cl = s['command']['seq'].astype(np.int64), s['command']['_log_ns']
-        order = np.argsort(es, kind='stable')
-        pos = np.searchsorted(es[order], cseq)
-        ok = pos < len(es)
-        ok[ok] &= es[order][pos[ok]] == cseq[ok]
-        if ok.any():
-            lat = (cl[ok] - el[order][pos[ok]]) / 1e6
-            m['loop_latency_ms'] = {'p50': float(np.percentile(lat, 50)),
-                                    'p99': float(np.percentile(lat, 99)),
-                                    'max': float(lat.max()), 'matched': int(ok.sum()),
-                                    'commands': int(len(cseq)), 'encoders': int(len(es))}
     return m
+
+
+def loop_latency(enc: dict, cmd: dict) -> dict | None:
+    """Loop latency (ms): the command's receive time minus the encoders' of the same seq;
+    percentiles and counts (None when no command matches a sample of the encoders)."""
+    es, el = enc['seq'].astype(np.int64), enc['_log_ns']
+    cseq, cl = cmd['seq'].astype(np.int64), cmd['_log_ns']
+    order = np.argsort(es, kind='stable')
+    pos = np.searchsorted(es[order], cseq)
+    ok = pos < len(es)
+    ok[ok] &= es[order][pos[ok]] == cseq[ok]
+    if not ok.any():
+        return None
+    lat = (cl[ok] - el[order][pos[ok]]) / 1e6
+    return {'p50': float(np.percentile(lat, 50)), 'p99': float(np.percentile(lat, 99)),
+            'max': float(lat.max()), 'matched': int(ok.sum()),
+            'commands': int(len(cseq)), 'encoders': int(len(es))}
 
 
 def estimator_gaps(state: dict | None) -> dict | None:
