@@ -101,20 +101,10 @@ class ControllerNode(RwNode):
         self.rig = declare_rig(self.param_table)
         self.sample_time = sample_time(self, self.param_table)   # lockstep: ROS time from the samples' stamps
         p = self.param_table.declare(controller_specs(self.rig, QOS_CONTROL_LATEST.depth))
-        # gains not given -> designed from the design parameters
-        values = {n: p[n] for n in PARAM_FIELDS}
         #: the design parameters the gains were designed from (a group is redesigned when one
         #: of its design parameters changes value)
         self.designs = {n: p[n] for n in DESIGN_DEFAULTS}
-        for group, names in DESIGN_GROUPS.items():
-            if any(values[n] is None for n in names):
-                try:
-                    designed = gains_from_design(self.rig, group, self._spec(group, self.designs))
-                except (ValueError, TypeError, KeyError, ArithmeticError) as exc:
-                    raise ConfigError(f'{group} design: {exc}') from exc
-                for n in names:
-                    if values[n] is None:
-                        values[n] = designed[n]
+        values = self._given_or_designed(p)
         try:
             self.ctrl = Controller(self.rig, ControllerConfig())  # placeholder, replaced below
         except ValueError as exc:  # pragma: no cover - defaults are valid
@@ -144,6 +134,34 @@ class ControllerNode(RwNode):
         self._since_status = 0
         self._syncing = False
         self._pending_params: list[Parameter] = []
+        self._create_interfaces(p, watched)
+        self.cmd_msg = MotorCommand()
+        self.last_status = None
+        c = self.ctrl.config
+        self.get_logger().info(
+            f'mode {self.ctrl.mode}; balance ({c.balance_kpp:.4g}, {c.balance_kdp:.4g}, {c.balance_kpr:.4g}, '
+            f'{c.balance_kdr:.4g}); patch ({c.patch_kpp:.4g}, {c.patch_kdp:.4g}, {c.patch_kdr:.4g}); '
+            f'swingup c_e={c.swingup_c_e:.4g} c_v={c.swingup_c_v:.4g}; friction {c.friction_compensation}; '
+            f'controller id {format_id(self.controller_id)}')
+
+    def _given_or_designed(self, p: dict) -> dict:
+        """The controller's parameter values of ``p``, each gain not given designed from the
+        design parameters of its group (:attr:`designs`)."""
+        values = {n: p[n] for n in PARAM_FIELDS}
+        for group, names in DESIGN_GROUPS.items():
+            if any(values[n] is None for n in names):
+                try:
+                    designed = gains_from_design(self.rig, group, self._spec(group, self.designs))
+                except (ValueError, TypeError, KeyError, ArithmeticError) as exc:
+                    raise ConfigError(f'{group} design: {exc}') from exc
+                for n in names:
+                    if values[n] is None:
+                        values[n] = designed[n]
+        return values
+
+    def _create_interfaces(self, p: dict, watched: bool) -> None:
+        """The parameter callbacks, publishers, subscriptions, service and timers; ``watched``:
+        the e-stop comes on ``estop/state`` and the stale-state watchdog runs."""
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
         self.pub_cmd = self.create_publisher(MotorCommand, 'command', QOS_CONTROL_PUB)
@@ -166,14 +184,6 @@ class ControllerNode(RwNode):
         # as sim time moving on without states; judged on the node's clock in _check_stale)
         if watched:
             self.create_timer(WATCHDOG_PERIOD, self._check_stale, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.cmd_msg = MotorCommand()
-        self.last_status = None
-        c = self.ctrl.config
-        self.get_logger().info(
-            f'mode {self.ctrl.mode}; balance ({c.balance_kpp:.4g}, {c.balance_kdp:.4g}, {c.balance_kpr:.4g}, '
-            f'{c.balance_kdr:.4g}); patch ({c.patch_kpp:.4g}, {c.patch_kdp:.4g}, {c.patch_kdr:.4g}); '
-            f'swingup c_e={c.swingup_c_e:.4g} c_v={c.swingup_c_v:.4g}; friction {c.friction_compensation}; '
-            f'controller id {format_id(self.controller_id)}')
 
     # ------------------------------------------------------------ parameters
     @staticmethod
