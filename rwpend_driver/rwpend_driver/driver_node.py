@@ -107,6 +107,23 @@ PARAMS = [
 ]
 
 
+def link_config(p: dict, rig) -> LinkConfig:
+    """The link's settings from the driver's parameters ``p`` and the ``rig``'s sample period;
+    settings the link refuses are a ConfigError with every reason."""
+    cfg = LinkConfig(port=p['port'], baud=p['baud'], counts_per_rev=p['counts_per_rev'],
+                     sample_period=float(rig.sample_period),
+                     pendulum_sign=p['pendulum_sign'], motor_sign=p['motor_sign'],
+                     zero_on_configure=bool(p['zero_on_configure']),
+                     watchdog_period=float(p['watchdog_period']),
+                     command_timeout_samples=p['command_timeout_samples'],
+                     link_timeout=float(p['link_timeout']),
+                     handshake_timeout=float(p['handshake_timeout']))
+    errors = cfg.errors()
+    if errors:
+        raise ConfigError('driver parameters: ' + '; '.join(errors))
+    return cfg
+
+
 class DriverNode(LifecycleNode):
     """The rig's plant node: topics and parameters of the module doc; the link in DriverLink."""
 
@@ -131,17 +148,7 @@ class DriverNode(LifecycleNode):
         if p['counts_per_rev'] == 0:
             p['counts_per_rev'] = int(self.rig.counts_per_rev)
         self.p = p
-        self.cfg = LinkConfig(port=p['port'], baud=p['baud'], counts_per_rev=p['counts_per_rev'],
-                              sample_period=float(self.rig.sample_period),
-                              pendulum_sign=p['pendulum_sign'], motor_sign=p['motor_sign'],
-                              zero_on_configure=bool(p['zero_on_configure']),
-                              watchdog_period=float(p['watchdog_period']),
-                              command_timeout_samples=p['command_timeout_samples'],
-                              link_timeout=float(p['link_timeout']),
-                              handshake_timeout=float(p['handshake_timeout']))
-        errors = self.cfg.errors()
-        if errors:
-            raise ConfigError('driver parameters: ' + '; '.join(errors))
+        self.cfg = link_config(p, self.rig)
         self.link: DriverLink | None = None
         self.thread: threading.Thread | None = None
         self.stop = threading.Event()
@@ -154,24 +161,7 @@ class DriverNode(LifecycleNode):
         self.estop = False
         self.estop_commands = 0          # commands refused because of the e-stop
         self.frame_id = p['frame_id']
-        # the link thread publishes wire bytes (rwpend_ros.wire): no message objects built
-        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
-        self.pub_applied = self.create_publisher(AppliedCommand, 'applied', QOS_CONTROL_PUB)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
-        self.malformed_commands = 0
-        # wire bytes, once each and in order (rwpend_ros.order)
-        self.sub_cmd = (local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
-                                           sender=wire.command_sender) if external_command else None)
-        #: one controller at a time (rwpend_ros.claim), judged on the link's sample counter
-        try:
-            self.claim = CommandClaim(p['claim_timeout_samples'])
-        except ValueError as exc:
-            raise ConfigError(f'claim_timeout_samples {exc}') from exc
-        estop_subscriptions(self, self.on_estop_topic)
-        #: the plant's e-stop as it is (latched): the controller and the console follow it
-        self.pub_estop_state = self.create_publisher(Bool, 'estop/state', QOS_LATCHED)
-        self.pub_estop_state.publish(Bool(data=False))
-        self.create_service(SetBool, '~/estop', self.on_estop_service)
+        self._create_interfaces(p, external_command)
         # in the loop's slack: after a command is written, not while one waits (PERFORMANCE.md, "What each mechanism buys")
         self.diag_timer = SlackTimer(self, p['diagnostics_period'], self.publish_diagnostics)
         self.diag_lock = threading.Lock()   # the link thread reports losses at once, too
@@ -196,6 +186,28 @@ class DriverNode(LifecycleNode):
         if p['autostart']:
             # a fixed period (the EventsExecutor of rclpy 7.1.6 mishandles a re-armed timer)
             self.autostart_timer = self.create_timer(0.05, self.autostart)
+
+    def _create_interfaces(self, p: dict, external_command: bool) -> None:
+        """The publishers, the ``command`` subscription (``external_command``), the command
+        claim, the e-stop's subscriptions, its latched state and its service."""
+        # the link thread publishes wire bytes (rwpend_ros.wire): no message objects built
+        self.pub_enc = self.create_publisher(EncoderCounts, 'encoders', QOS_CONTROL_PUB)
+        self.pub_applied = self.create_publisher(AppliedCommand, 'applied', QOS_CONTROL_PUB)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', QOS_STATUS)
+        self.malformed_commands = 0
+        # wire bytes, once each and in order (rwpend_ros.order)
+        self.sub_cmd = (local_subscription(self, MotorCommand, 'command', self.on_command_raw, QOS_CONTROL,
+                                           sender=wire.command_sender) if external_command else None)
+        #: one controller at a time (rwpend_ros.claim), judged on the link's sample counter
+        try:
+            self.claim = CommandClaim(p['claim_timeout_samples'])
+        except ValueError as exc:
+            raise ConfigError(f'claim_timeout_samples {exc}') from exc
+        estop_subscriptions(self, self.on_estop_topic)
+        #: the plant's e-stop as it is (latched): the controller and the console follow it
+        self.pub_estop_state = self.create_publisher(Bool, 'estop/state', QOS_LATCHED)
+        self.pub_estop_state.publish(Bool(data=False))
+        self.create_service(SetBool, '~/estop', self.on_estop_service)
 
     # ------------------------------------------------------------ autostart
     def autostart(self) -> None:
