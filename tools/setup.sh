@@ -4,7 +4,7 @@
 #   2. rwpend_msgs built with cmake (ament_cmake + rosidl) and installed into the venv prefix,
 #      like the ROS wheels themselves, so no sourcing is ever needed
 #   3. the ament_python packages installed editable into the venv
-# With --browser (make test, make test-system) also Debian's chromium and chromium-driver, which
+# With --browser (make test, make test-browser) also Debian's chromium and chromium-driver, which
 # the console's page tests drive.
 # Each step is skipped when its inputs did not change (stamp files in .venv/).
 set -euo pipefail
