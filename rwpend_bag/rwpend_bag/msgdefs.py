@@ -3,7 +3,8 @@
 * :func:`joined_definition` builds the ``ros2msg`` schema text rosbag2 embeds in MCAP: the main
   ``.msg`` text, then for every dependency a line of 80 ``=``, ``MSG: pkg/Name`` and its text.
   ``.msg`` files are looked up under ``<prefix>/share/<pkg>/msg/`` for every prefix of
-  ``$AMENT_PREFIX_PATH`` (then ``sys.prefix``).
+  ``$AMENT_PREFIX_PATH`` (then ``sys.prefix``) and parsed by rosbags, both by
+  :mod:`rwpend_ros.msglayout` (the source of the wire codecs' layouts too).
 * :func:`type_hash` computes the RIHS01 type description hash (rosbags, equal to rosidl's).
 * :func:`import_message_class` resolves ``pkg/msg/Name`` to the Python class (for rclpy).
 """
@@ -11,83 +12,18 @@ from __future__ import annotations
 
 import functools
 import importlib
-import os
-import re
-import sys
-from pathlib import Path
+
+from rwpend_ros.msglayout import (DefinitionNotFound, dependencies, fields, full_type, msg_text,  # noqa: F401
+                                  parse, share_dirs, split_type)
 
 SEPARATOR = '=' * 80
-PRIMITIVES = {'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
-              'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'}
-
-
-class DefinitionNotFound(LookupError):
-    """No .msg file for a type name."""
-
-
-def split_type(type_name: str) -> tuple[str, str]:
-    """'pkg/msg/Name' or 'pkg/Name' -> ('pkg', 'Name')."""
-    parts = type_name.strip().split('/')
-    if len(parts) == 3 and parts[1] == 'msg':
-        return parts[0], parts[2]
-    if len(parts) == 2:
-        return parts[0], parts[1]
-    raise ValueError(f'not a message type name: {type_name!r} (expected pkg/msg/Name)')
-
-
-def full_type(type_name: str) -> str:
-    pkg, name = split_type(type_name)
-    return f'{pkg}/msg/{name}'
-
-
-def share_dirs() -> list[Path]:
-    prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
-    prefixes += [sys.prefix]
-    out, seen = [], set()
-    for p in prefixes:
-        d = Path(p) / 'share'
-        if d not in seen:
-            seen.add(d)
-            out.append(d)
-    return out
-
-
-@functools.lru_cache(maxsize=None)
-def msg_text(type_name: str) -> str:
-    """Text of the .msg file of a type."""
-    pkg, name = split_type(type_name)
-    for share in share_dirs():
-        f = share / pkg / 'msg' / f'{name}.msg'
-        if f.is_file():
-            return f.read_text(encoding='utf-8')
-    raise DefinitionNotFound(f'no {pkg}/msg/{name}.msg under any of '
-                             f'{", ".join(str(s) for s in share_dirs())}')
-
-
-_FIELD = re.compile(r'^\s*([A-Za-z][\w/]*)(<=\d+)?(\[[^\]]*\])?\s+([A-Za-z]\w*)\s*(=)?')
 
 
 def field_types(text: str, pkg: str) -> list[str]:
-    """Non-primitive field types ('pkg/Name') referenced by a .msg text, in order; constants skipped."""
-    out = []
-    for line in text.splitlines():
-        line = line.split('#', 1)[0].strip()
-        if not line:
-            continue
-        m = _FIELD.match(line)
-        if not m or m.group(5):  # not a field, or a constant NAME=value
-            continue
-        base = m.group(1)
-        if base in PRIMITIVES:
-            continue
-        if base == 'Header':
-            dep = 'std_msgs/Header'
-        elif '/' in base:
-            dep = '/'.join(split_type(base))
-        else:
-            dep = f'{pkg}/{base}'
-        out.append(dep)
-    return out
+    """Message types ('pkg/Name') the fields of a .msg text of package ``pkg`` use, in order,
+    each once (rosbags parses it; constants are not fields)."""
+    name = f'{pkg}/msg/Definition'
+    return ['/'.join(split_type(t)) for t in dependencies(parse(text, name)[name])]
 
 
 @functools.lru_cache(maxsize=None)
@@ -107,8 +43,7 @@ def join_definition(main: str, pkg: str) -> str:
         if dep in order:
             continue
         order.append(dep)
-        dpkg, _ = split_type(dep)
-        todo.extend(field_types(msg_text(dep), dpkg))
+        todo.extend('/'.join(split_type(t)) for t in dependencies(fields(dep)))
     parts = [main.rstrip('\n')]
     for dep in order:
         parts.append(f'{SEPARATOR}\nMSG: {dep}\n{msg_text(dep).rstrip(chr(10))}')
