@@ -1,20 +1,23 @@
-"""CDR layout from ros2msg schema text, and column-wise (numpy, vectorised) decoding. No rclpy.
+"""Column-wise (numpy, vectorised) decoding of CDR messages from ros2msg schema text. No rclpy.
 
-:func:`parse_schema` turns the joined ``ros2msg`` text embedded in a bag into struct definitions.
+:func:`parse_schema` turns the joined ``ros2msg`` text embedded in a bag into struct definitions
+(rosbags parses it: :func:`rwpend_ros.msglayout.parse`).
 :func:`decode_columns` decodes *all* messages of one topic at once: it walks the fields once,
 keeping a numpy array of the current offset of every message, so variable-length strings
-(header.frame_id, ...) only shift offsets; every primitive field becomes one fancy-index gather.
+(header.frame_id, ...) only shift offsets; every primitive field becomes one fancy-index gather,
+aligned by CDR's rule (:func:`rwpend_ros.msglayout.align`).
 Types with sequences of strings/structs raise :class:`NotBulkDecodable` (callers fall back to
 ``mcap_ros2``'s per-message decoder, :func:`decode_columns_fallback`).
 """
 from __future__ import annotations
 
-import re
-from dataclasses import dataclass
+import functools
+import struct
 
 import numpy as np
 
-SEPARATOR_RE = re.compile(r'^={80,}\s*$', re.M)
+from rwpend_ros.msglayout import Field, align, parse, type_key  # noqa: F401 - Field: the fields' type
+from rwpend_ros.wire import message_seq_stamp
 
 PRIM = {  # name: (numpy dtype, size)
     'bool': ('?', 1), 'byte': ('u1', 1), 'char': ('u1', 1), 'uint8': ('u1', 1), 'int8': ('i1', 1),
@@ -28,71 +31,15 @@ class NotBulkDecodable(Exception):
     """The type (or this data) cannot be decoded column-wise."""
 
 
-@dataclass(frozen=True)
-class Field:
-    name: str
-    type: str          # primitive name, 'string', or full 'pkg/msg/Name'
-    array: str | None  # None scalar, 'fixed', 'seq'
-    size: int = 0      # fixed array length
-
-
-_LINE = re.compile(r'^([A-Za-z][\w/]*)(?:<=\d+)?(\[(<=)?(\d*)\])?\s+([A-Za-z]\w*)(\s*=.*)?')
-
-
-def _resolve(t: str, pkg: str) -> str:
-    if t in PRIM or t in STRINGS:
-        return t
-    if t == 'Header':
-        return 'std_msgs/msg/Header'
-    parts = t.split('/')
-    if len(parts) == 2:
-        return f'{parts[0]}/msg/{parts[1]}'
-    if len(parts) == 3:
-        return t
-    return f'{pkg}/msg/{t}'
-
-
-def parse_msg(text: str, pkg: str) -> list[Field]:
-    fields = []
-    for line in text.splitlines():
-        line = line.split('#', 1)[0].strip()
-        if not line:
-            continue
-        m = _LINE.match(line)
-        if not m:
-            raise ValueError(f'cannot parse message definition line: {line!r}')
-        if m.group(6):  # constant NAME=value
-            continue
-        base, brackets, bounded, n, name = m.groups()[:5]
-        arr = None
-        size = 0
-        if brackets:
-            if n and not bounded:
-                arr, size = 'fixed', int(n)
-            else:
-                arr = 'seq'
-        fields.append(Field(name, _resolve(base, pkg), arr, size))
-    return fields
+@functools.lru_cache(maxsize=256)
+def _parsed(type_name: str, text: str) -> dict[str, tuple[Field, ...]]:
+    return {name: tuple(fs) for name, fs in parse(text, type_name).items()}
 
 
 def parse_schema(type_name: str, text: str) -> dict[str, list[Field]]:
-    """Joined ros2msg text -> {full type name: fields}; the main type is ``type_name``."""
-    parts = SEPARATOR_RE.split(text)
-    types: dict[str, list[Field]] = {}
-    main_pkg = type_name.split('/')[0]
-    types[_resolve(type_name, main_pkg)] = parse_msg(parts[0], main_pkg)
-    for part in parts[1:]:
-        part = part.lstrip('\n')
-        first, _, body = part.partition('\n')
-        if not first.startswith('MSG:'):
-            raise ValueError(f'bad dependency block in schema of {type_name}: {first!r}')
-        dep = _resolve(first[4:].strip(), main_pkg)
-        types[dep] = parse_msg(body, dep.split('/')[0])
-    return types
-
-
-def _align(off, base, a):
-    return base + ((off - base + (a - 1)) // a) * a
+    """Joined ros2msg text -> {full type name: fields}; the main type is ``type_name``.
+    ValueError when it cannot be parsed."""
+    return {name: list(fs) for name, fs in _parsed(type_key(type_name), text).items()}
 
 
 class _Walker:
@@ -108,7 +55,7 @@ class _Walker:
             raise NotBulkDecodable('message shorter than its layout')
 
     def _gather(self, dt, size, count=1):
-        self.off = _align(self.off, self.base, min(size, 8))
+        self.off = self.base + align(self.off - self.base, size)
         total = size * count
         self._check(total)
         idx = self.off[:, None] + np.arange(total)
@@ -187,7 +134,7 @@ def decode_columns(type_name: str, schema_text: str, datas: list[bytes],
     Returns {'header.stamp.sec': array, 'seq': array, ...}. Raises NotBulkDecodable.
     """
     types = parse_schema(type_name, schema_text)
-    main = _resolve(type_name, type_name.split('/')[0])
+    main = type_key(type_name)
     if not datas:
         return {}
     lengths = np.fromiter((len(d) for d in datas), dtype=np.int64, count=len(datas))
@@ -253,23 +200,18 @@ def header_seq_layout(type_name: str, schema_text: str) -> bool:
         types = parse_schema(type_name, schema_text)
     except ValueError:
         return False
-    f = types.get(_resolve(type_name, type_name.split('/')[0]), [])
+    f = types.get(type_key(type_name), [])
     return (len(f) >= 2 and f[0].type == 'std_msgs/msg/Header' and f[0].array is None
             and f[1].name == 'seq' and f[1].type == 'uint64' and f[1].array is None)
 
 
 def seq_of(data: bytes) -> int | None:
-    """The uint64 after the Header of one CDR message (None if too short)."""
-    # 4 encapsulation + 8 stamp, then frame_id string: uint32 length + bytes (incl. NUL)
-    if len(data) < 20:
+    """The uint64 after the Header of one CDR message (None if too short): the layout of the
+    loop's messages (:func:`rwpend_ros.wire.message_seq_stamp`)."""
+    try:
+        return message_seq_stamp(data)[0]
+    except struct.error:
         return None
-    n = int.from_bytes(data[12:16], 'little')
-    off = 16 + n - 4                 # relative to the CDR body (after the 4-byte encapsulation)
-    off = (off + 7) & ~7
-    p = 4 + off
-    if p + 8 > len(data):
-        return None
-    return int.from_bytes(data[p:p + 8], 'little')
 
 
 def starts_with_header(type_name: str, schema_text: str) -> bool:
@@ -278,5 +220,5 @@ def starts_with_header(type_name: str, schema_text: str) -> bool:
         types = parse_schema(type_name, schema_text)
     except ValueError:
         return False
-    f = types.get(_resolve(type_name, type_name.split('/')[0]), [])
+    f = types.get(type_key(type_name), [])
     return bool(f) and f[0].type == 'std_msgs/msg/Header' and f[0].array is None
