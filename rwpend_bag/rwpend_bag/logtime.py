@@ -55,6 +55,8 @@ from collections import deque
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from rwpend_ros.wire import unpack_clock_ns
+
 from . import cdr
 
 #: stamp kinds of a topic's type
@@ -78,19 +80,15 @@ def stamp_kind(type_name: str, schema_text: str) -> str:
     return STAMP_HEADER if cdr.starts_with_header(type_name, schema_text) else STAMP_NONE
 
 
-_TIME = (struct.Struct('>iI'), struct.Struct('<iI'))   # by the encapsulation's low bit
-
-
 def leading_time_ns(data: bytes) -> int | None:
     """The builtin_interfaces/Time at the start of a CDR message (a Header's stamp, a Clock's
-    value) in ns; None when the bytes are too short or the time is negative."""
-    if len(data) < 12:
+    value; either byte order, by the encapsulation's low bit) in ns
+    (:func:`rwpend_ros.wire.unpack_clock_ns`); None when the bytes are too short or the time is
+    negative."""
+    try:
+        return unpack_clock_ns(data)
+    except (struct.error, ValueError):
         return None
-    # encapsulation: CDR_BE 0x0000, CDR_LE 0x0001 (and the PL_ variants: same low bit)
-    sec, nsec = _TIME[data[1] & 1].unpack_from(data, 4)
-    if sec < 0:
-        return None
-    return sec * 1_000_000_000 + nsec
 
 
 class Entry(NamedTuple):
