@@ -729,7 +729,7 @@ def run_scale(out: Path, h: float, duration: float, max_rigs: int, env: dict, la
     instant of sample k+1, or never) passes ``limit`` or ``max_rigs`` is reached. Each step's
     window opens when every rig has been running for SETTLE_S s and lasts ``duration`` s."""
     say = say or (lambda s: None)
-    base = int(env.get('ROS_DOMAIN_ID', '60'))
+    domain0 = int(env.get('ROS_DOMAIN_ID', '60'))
     steps = []
     for n in range(1, max_rigs + 1):
         say(f'rwpend bench: scale, {n} rig(s) at {1 / h:g} Hz, {duration:g} s ...')
@@ -745,7 +745,7 @@ def run_scale(out: Path, h: float, duration: float, max_rigs: int, env: dict, la
                 a, specs, files = run.stack, run.specs, run.files
                 if cpu_req is None:
                     cpu_req = _cpu_latency_request(a)
-                renv, tdir = _with_trace({**env, 'ROS_DOMAIN_ID': str(base + i - 1)},
+                renv, tdir = _with_trace({**env, 'ROS_DOMAIN_ID': str(domain0 + i - 1)},
                                          out / f'{tag}_{i}.trace')
                 la = Launcher(specs, namespace=a.ns, params_files=files, env=renv, out=log)
                 launchers.append(la)
