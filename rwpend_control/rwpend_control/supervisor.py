@@ -87,6 +87,9 @@ from .safety import (BRAKE_DONE_SPEED, SATURATION_ACTIONS, WHEEL_SPEED_ACTIONS, 
 #: how the fault of a sample the controller answered without a fresh state begins (readers of
 #: controller/status tell the loop's faults from a law's by it)
 STALE_FAULT = 'stale state'
+#: how the fault of a sample whose state the controller refused as implausible begins (the
+#: loop's too: the estimator's output, not the law)
+BAD_STATE_FAULT = 'bad state'
 
 #: s of silence of the state stream after which its return starts the mode afresh (module doc);
 #: shorter stale episodes are answered with u = 0 and the law goes on
@@ -629,15 +632,15 @@ class Controller:
         for name, v in (('theta', theta), ('theta_dot', theta_dot), ('wheel_angle', wheel_angle),
                         ('wheel_rate', wheel_rate), ('friction', friction)):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                return f'bad state: {name} = {v!r}'
+                return f'{BAD_STATE_FAULT}: {name} = {v!r}'
         if abs(theta) > MAX_ANGLE or abs(wheel_angle) > MAX_ANGLE:
-            return 'bad state: angle beyond 1e7 rad'
+            return f'{BAD_STATE_FAULT}: angle beyond 1e7 rad'
         if abs(theta_dot) > MAX_THETA_DOT:
-            return f'bad state: |theta_dot| = {abs(theta_dot):.4g} > {MAX_THETA_DOT:g} rad/s'
+            return f'{BAD_STATE_FAULT}: |theta_dot| = {abs(theta_dot):.4g} > {MAX_THETA_DOT:g} rad/s'
         if abs(wheel_rate) > self.max_wheel_rate:
-            return f'bad state: |wheel_rate| = {abs(wheel_rate):.4g} > {self.max_wheel_rate:.4g} rad/s'
+            return f'{BAD_STATE_FAULT}: |wheel_rate| = {abs(wheel_rate):.4g} > {self.max_wheel_rate:.4g} rad/s'
         if abs(friction) > MAX_FRICTION:
-            return f'bad state: |friction| = {abs(friction):.4g} > {MAX_FRICTION:g}'
+            return f'{BAD_STATE_FAULT}: |friction| = {abs(friction):.4g} > {MAX_FRICTION:g}'
         return ''
 
     def _law_output(self, t, x, theta, theta_dot, wheel_angle, wheel_rate) -> float:

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rwpend_control.supervisor import STALE_FAULT
+from rwpend_control.supervisor import BAD_STATE_FAULT, STALE_FAULT
 from rwpend_model.plant import Plant
 
 from .checks import delivery_problem, Rest, direction_problem, rest_problem
@@ -41,9 +41,11 @@ class Record:
 
 def refused(name: str, d) -> None:
     """IdentError with the procedure's reason when it refused or stopped the step (a law fault on
-    controller/status). Other faults -- a state a few ms late, on the rig in real time -- are the
-    loop's, reported by it, and do not stop the identification."""
-    faults = [(t, f) for t, f in d.faults if not f.startswith(STALE_FAULT)]
+    controller/status). The loop's faults -- a state a few ms late, on the rig in real time; a
+    state refused as implausible, e.g. the estimator's first samples after a hand moved the
+    pendulum between two runs -- are reported by the loop and do not stop the identification
+    (what they did to the data, the identification's own checks judge)."""
+    faults = [(t, f) for t, f in d.faults if not f.startswith((STALE_FAULT, BAD_STATE_FAULT))]
     if faults:
         t, fault = faults[0]
         reason = fault.split('NotReady: ', 1)[-1]

@@ -136,3 +136,15 @@ def test_only_a_stalled_run_is_run_once_more(tmp_path, monkeypatch, reason, call
         session.run_once_more_if_stalled(run, tmp_path, session.Options(), lambda s: None)
     assert len(seen) == calls
     assert (tmp_path / 'runs' / 'pulse+3.stalled').is_dir() == (calls == 2)
+
+
+def test_only_a_laws_fault_is_a_refusal_the_loops_are_not():
+    """A stale or implausible state (the loop's faults, e.g. the estimator just after a hand
+    moved the pendulum) does not stop the identification; a law's fault does, with its reason."""
+    from types import SimpleNamespace
+    from rwpend_ident.records import IdentError, refused
+    refused('swing', SimpleNamespace(faults=[(0.0, 'bad state: |theta_dot| = 285.9 > 200 rad/s'),
+                                             (0.2, 'stale state: 3 ms old')]))
+    with pytest.raises(IdentError, match=r'pulse\+: the step was refused at t = 0.50 s: rotor moving'):
+        refused('pulse+', SimpleNamespace(faults=[(0.1, 'bad state: |theta_dot| = 250 > 200 rad/s'),
+                                                  (0.5, 'law fault: NotReady: rotor moving')]))
