@@ -3,7 +3,7 @@ turns it into the processes to start (:class:`Plan`: node specs and params files
 :class:`rwpend_bringup.launch.Launcher`), validating it first.
 
 ``./rwpend up`` parses its command line into a :class:`Stack` (``rwpend_bringup.cli``); the lab,
-identification, the bench and the soak describe their stacks with it directly. Nothing here
+identification and the bench describe their stacks with it directly. Nothing here
 starts a process or imports rclpy.
 
 The layouts (``layout``): ``loop`` -- the plant (simulator or driver), estimator, controller and
@@ -65,14 +65,16 @@ def stack_file() -> Path:
 
 @dataclass
 class Stack:
-    """What to run. Every field has the meaning of the ``./rwpend up`` option of the same name
-    (``./rwpend up --help``); None is the option not given.
+    """What to run. A field has the meaning of the ``./rwpend up`` option of its name
+    (``./rwpend up --help``), None the option not given; the others:
 
-    ``overrides``: per node ('sim', 'estimator', 'controller', 'driver') and 'rig' (rig data for
-    every node), parameter name -> value, as ``--set NODE.PARAM=VALUE``. ``taps``: (simulated
-    time s, Δθ̇ rad/s) pairs. ``pins``: process name -> CPU ids. ``rt_priority`` and ``layout``
-    None: chosen by :func:`resolve` for the machine and the plant. ``only``: the processes of
-    this host, None for all."""
+    ``params_files``: ``--params``. ``overrides`` (``--set NODE.PARAM=VALUE``): per node ('sim',
+    'estimator', 'controller', 'driver') and 'rig' (rig data for every node), parameter name ->
+    value. ``taps`` (``--tap``): (simulated time s, Δθ̇ rad/s) pairs. ``controller``: not
+    ``--no-controller``. ``pins`` (``--pin``): process name -> CPU ids. ``layout``
+    (``--composed``): 'loop', 'control' or 'none'. ``rt_priority`` and ``layout`` None: chosen by
+    :func:`resolve` for the machine and the plant. ``only`` (``--only``): the processes of this
+    host, None for all."""
     plant: str = 'sim'
     lockstep: bool = False
     duration: float | None = None
