@@ -292,6 +292,16 @@ def _base(base):
     return Stack() if base is None else base
 
 
+def _launcher(run, out: Path, tag: str, env: dict, echo, spec_hook):
+    """(launcher, log, environment, trace directory) of a run's plan ``run`` (its specs first
+    given to ``spec_hook``), its log ``out/TAG.log`` and its trace ``out/TAG.trace``."""
+    if spec_hook is not None:
+        spec_hook(run.specs)
+    log = _Tee(out / f'{tag}.log', echo)
+    env, trace_dir = _with_trace(env, out / f'{tag}.trace')
+    return Launcher(run.specs, namespace=run.stack.ns, params_files=run.files, env=env, out=log), log, env, trace_dir
+
+
 def _cpu_latency_request(a):
     """The ``--cpu-latency`` PM QoS request of a run (what ``rwpend up`` holds for its stack),
     held by the benchmark while the run's launcher runs; a no-op without the option."""
@@ -311,12 +321,8 @@ def run_realtime(out: Path, h: float, duration: float, layout: str, env: dict,
     if bag.exists():
         shutil.rmtree(bag)
     run = _plan(replace(_base(base), mode='auto', h=h, record=str(bag), ns=ns, layout=LAYOUTS[layout]))
-    a, specs, files = run.stack, run.specs, run.files
-    if spec_hook is not None:
-        spec_hook(specs)
-    log = _Tee(out / f'{tag}.log', echo)
-    env, trace_dir = _with_trace(env, out / f'{tag}.trace')
-    launcher = Launcher(specs, namespace=a.ns, params_files=files, env=env, out=log)
+    a = run.stack
+    launcher, log, env, trace_dir = _launcher(run, out, tag, env, echo, spec_hook)
     load0 = _loadavg()
     cpu_req = _cpu_latency_request(a)
     try:
@@ -596,12 +602,8 @@ def run_lockstep(out: Path, h: float, sim_s: float, layout: str, record: bool, e
         shutil.rmtree(bag)
     run = _plan(replace(_base(base), lockstep=True, mode='auto', duration=sim_s, h=h, ns=ns,
                         record=str(bag) if record else None, layout=LAYOUTS[layout]))
-    a, specs, files = run.stack, run.specs, run.files
-    if spec_hook is not None:
-        spec_hook(specs)
-    log = _Tee(out / f'{tag}.log', echo)
-    env, trace_dir = _with_trace(env, out / f'{tag}.trace')
-    launcher = Launcher(specs, namespace=a.ns, params_files=files, env=env, out=log)
+    a = run.stack
+    launcher, log, env, trace_dir = _launcher(run, out, tag, env, echo, spec_hook)
     t0 = time.monotonic()
     load0 = _loadavg()
     polls: list[tuple[float, dict]] = []    # (time, CPU s per node), every 50 ms
