@@ -56,12 +56,14 @@ def rest_problem(theta: Sequence[float], rel: Sequence[float], rest: Rest) -> st
     return None
 
 
-def saturation_problem(saturated_s: float, limit_s: float, what: str) -> str | None:
-    """'saturation reached' when the command has been at |u| = u_max for ``saturated_s`` s,
-    longer than ``limit_s`` (``what``: where, e.g. 'holding 400 rad/s')."""
-    if saturated_s > limit_s:
-        return (f'saturation reached {what}: |u| at its limit for {saturated_s:.2f} s (more than '
-                f'{limit_s:g} s); the friction needs more torque than the amplifier gives -- lower the speeds')
+def saturation_problem(gain: float, min_gain: float, limit_s: float, what: str) -> str | None:
+    """'saturation reached' when the command has been at |u| = u_max for ``limit_s`` s and the
+    wheel gained only ``gain`` rad/s in the direction of u over them, less than ``min_gain``
+    (``what``: where, e.g. 'at a wheel speed of 400 rad/s'); None while it still accelerates."""
+    if gain < min_gain:
+        return (f'saturation reached {what}: |u| at its limit for {limit_s:g} s and the wheel gained '
+                f'{gain:.1f} rad/s (less than {min_gain:g}); the friction needs more torque than the '
+                f'amplifier gives -- lower the speeds')
     return None
 
 

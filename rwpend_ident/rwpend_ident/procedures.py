@@ -83,21 +83,32 @@ class Pulses(_AfterRest):
 class WheelSpeeds(_AfterRest):
     """PI wheel-speed control (3.14)-(3.16) through a schedule of references from rest
     (Experiments 8-9, the lab's WheelSpeedSteps: ``kdr``, ``ki``, ``times``, ``refs``); refuses when
-    |u| stays at u_max longer than ``max_saturation_s`` (0.3 s)."""
+    |u| has stayed at u_max for ``max_saturation_s`` (0.3 s) while the wheel sped up in the
+    direction of u by less than ``min_acceleration`` (30 rad/s^2) -- the friction takes all the
+    amplifier gives.
+    A saturated command that still accelerates the wheel is a catch-up (after a ramp, or after
+    samples the motor held at 0 on a late loop), not a refusal."""
 
     def __init__(self, params) -> None:
         super().__init__(params, WheelSpeedSteps(params))
         self.u_max = float(params['u_max'])
         self.limit = float(params.get('max_saturation_s', 0.3))
+        self.min_gain = float(params.get('min_acceleration', 30.0)) * self.limit
         self.h = float(params['h'])
-        self.saturated = 0.0
+        #: the wheel speed in the direction of u over the last ``limit`` s of saturation
+        self.speeds: deque = deque(maxlen=max(2, int(round(self.limit / self.h)) + 1))
 
     def __call__(self, s) -> float:
         u = super().__call__(s)
-        self.saturated = self.saturated + self.h if abs(u) >= self.u_max else 0.0
-        why = saturation_problem(self.saturated, self.limit, f'at a wheel speed of {s.wheel_rate:.0f} rad/s')
-        if why:
-            raise NotReady(why)
+        if abs(u) < self.u_max:
+            self.speeds.clear()
+            return u
+        self.speeds.append(s.wheel_rate if u > 0 else -s.wheel_rate)
+        if len(self.speeds) == self.speeds.maxlen:
+            why = saturation_problem(self.speeds[-1] - self.speeds[0], self.min_gain, self.limit,
+                                     f'at a wheel speed of {s.wheel_rate:.0f} rad/s')
+            if why:
+                raise NotReady(why)
         return u
 
 

@@ -42,8 +42,8 @@ def test_direction_problem_tells_which_one_is_reversed():
 
 
 def test_saturation_problem():
-    assert saturation_problem(0.2, 0.3, 'x') is None
-    assert 'saturation reached at 400 rad/s' in saturation_problem(0.31, 0.3, 'at 400 rad/s')
+    assert saturation_problem(12.0, 10.0, 0.3, 'x') is None
+    assert 'saturation reached at 400 rad/s' in saturation_problem(3.0, 10.0, 0.3, 'at 400 rad/s')
 
 
 def _state(t, theta=0.0, theta_dot=0.0, wheel=0.0, rate=0.0):
@@ -73,11 +73,22 @@ def test_pulses_refuse_a_swinging_pendulum():
 
 
 def test_wheel_speeds_stop_at_saturation():
+    """Saturated while the wheel does not speed up (the friction takes all the torque): refused."""
     law = _law('WheelSpeeds', kdr=0.2, ki=0.002, times=[0.0], refs=[5000.0], max_saturation_s=0.1)
     h = RIG.sample_period
     with pytest.raises(LawError, match='saturation reached'):
         for k in range(2000):
             law(_state(k * h))
+
+
+def test_wheel_speeds_carry_on_while_a_saturated_command_still_accelerates():
+    """Saturated for 1 s while the wheel catches up at 60 rad/s^2 (after a late loop held the
+    motor at 0): no refusal."""
+    law = _law('WheelSpeeds', kdr=0.2, ki=0.002, times=[0.0], refs=[5000.0], max_saturation_s=0.1)
+    h = RIG.sample_period
+    rest = round(Rest().still_s / h) + 5
+    us = [law(_state(k * h, rate=60.0 * max(0, k - rest) * h)) for k in range(rest + 1000)]
+    assert min(us[rest:]) == us[-1] > 0
 
 
 def test_breakaway_ramps_stop_when_the_rotor_slips():
