@@ -182,18 +182,56 @@ def test_a_hand_holds_the_pendulum_and_lets_go():
         p.hold(float('nan'))
 
 
-@pytest.mark.parametrize('back_emf', [True, False])
-def test_free_motion_derivative_is_the_models_bit_for_bit(back_emf):
-    """Plant._free_deriv (the integrator's fast path) gives exactly what _deriv gives for a
-    rotor that turns freely, disturbance included."""
+def _bits(values) -> list:
+    """Floats as their exact bits (float.hex tells -0.0 from 0.0, which == does not)."""
+    return [v.hex() if isinstance(v, float) else v for v in values]
+
+
+@pytest.mark.parametrize('back_emf, friction', [(True, True), (False, True), (True, False)])
+def test_free_substep_is_the_plain_substep_bit_for_bit(back_emf, friction):
+    """Plant._free_substep (the integrator's fast path: (2.15) written out at each RK4 stage)
+    gives exactly what the plain sub-step through _deriv gives, disturbance, the back-EMF
+    cut-off (2.13) and zero relative speed included."""
     import random
-    p = Plant(load_rig(), back_emf=back_emf)
+    p = Plant(load_rig(), back_emf=back_emf, friction=friction)
     p.disturbance = 0.37
-    d = p._free_deriv()
+    fast = p._free_substep()
     rnd = random.Random(3)
-    for _ in range(2000):
-        th, thd, thrd, tau = (rnd.uniform(-7, 7), rnd.uniform(-30, 30), rnd.uniform(-400, 400),
-                              rnd.uniform(-12, 12))
+    for _ in range(3000):
+        th, thd, thr, thrd = (rnd.uniform(-7, 7), rnd.uniform(-30, 30), rnd.uniform(-50, 50),
+                              rnd.uniform(-1000, 1000))
+        tau0, tau_mid, tau1 = (rnd.uniform(-12, 12) for _ in range(3))
         if rnd.random() < 0.05:
             thrd = thd          # zero relative speed: no kinetic friction
-        assert d(th, thd, thrd, tau) == p._deriv(th, thd, thrd, tau, False)[:2]
+        if rnd.random() < 0.05:
+            tau0 = tau_mid = tau1 = 0.0
+        args = (th, thd, thr, thrd, tau0, tau_mid, tau1)
+        assert _bits(fast(*args)) == _bits(p._free_substep_plain(*args))
+
+
+@pytest.mark.parametrize('kwargs', [{}, {'back_emf': False}, {'friction': False}, {'motor_lag': False},
+                                    {'theta': 3.1, 'wheel_rate': 700.0}, {'wheel_rate': 900.0},
+                                    {'bracket': True, 'wheel_rate': 5.0}])
+def test_step_is_the_plain_integration_bit_for_bit(kwargs):
+    """Plant.step through the fast sub-step (made once per disturbance, the lag's decays made
+    once) gives the states of the same step through the plain sub-step, sample for sample:
+    stick and slip (3.17), taps and torque pulses included."""
+    import random
+    rig = load_rig()
+    fast, plain = Plant(rig, **kwargs), Plant(rig, **kwargs)
+    plain._free_motion = lambda: plain._free_substep_plain
+    rnd = random.Random(5)
+    for k in range(3000):
+        u = rnd.choice([0.0, rnd.uniform(-12, 12), rnd.uniform(-0.5, 0.5)])
+        if k % 500 == 250 and not kwargs.get('bracket'):
+            for p in (fast, plain):
+                p.tap(0.3)
+        if k % 700 == 100 and not kwargs.get('bracket'):
+            d = rnd.uniform(-3, 3)
+            fast.disturbance, plain.disturbance = d, d
+        if k % 700 == 300:
+            fast.disturbance = plain.disturbance = 0.0
+        fast.step(u)
+        plain.step(u)
+        assert _bits([*fast._x, fast._tau, fast._stuck, fast._friction, fast.t]) == \
+            _bits([*plain._x, plain._tau, plain._stuck, plain._friction, plain.t])
