@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rwpend_control.supervisor import MODES
+from rwpend_control.parameters import MODES
 
 from . import bags, paramsvc
 from .fmt import value_text

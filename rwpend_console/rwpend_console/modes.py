@@ -1,6 +1,6 @@
 """The mode buttons (pure: the controller's modes and its law file in, buttons out; no rclpy).
 
-One button per mode the controller takes (:data:`rwpend_control.supervisor.MODES`), each with
+One button per mode the controller takes (:data:`rwpend_control.parameters.MODES`), each with
 what it does. Mode ``law`` runs a law of one's own, which the controller loads at start from its
 read-only parameter ``law.file`` (:mod:`rwpend_control.controller_node`): without one the
 controller refuses the mode, so the button says so and is not offered; when the console cannot

@@ -32,7 +32,7 @@ from .fmt import number_text, value_text
 TYPE_NAMES = {0: 'not_set', 1: 'bool', 2: 'integer', 3: 'double', 4: 'string', 5: 'byte_array',
               6: 'bool_array', 7: 'integer_array', 8: 'double_array', 9: 'string_array'}
 TYPE_NUMBERS = {v: k for k, v in TYPE_NAMES.items()}
-#: the gain groups a design parameter group designs (rwpend_control.supervisor.DESIGN_GROUPS)
+#: the gain groups a design parameter group designs (rwpend_control.parameters.DESIGN_GROUPS)
 DESIGN_MARK = '.design.'
 
 
@@ -246,7 +246,8 @@ def design_preview(rig, group: str, designs: Mapping[str, Any], changes: Mapping
     (rwpend_model.rig.Rig); the controller's own functions compute them
     (:func:`rwpend_control.supervisor.gains_from_design`, :func:`rwpend_control.design.check_stable`)."""
     from rwpend_control.design import check_stable
-    from rwpend_control.supervisor import DESIGN_GROUPS, gains_from_design
+    from rwpend_control.parameters import DESIGN_GROUPS
+    from rwpend_control.supervisor import gains_from_design
     if group not in DESIGN_GROUPS:
         return Preview(False, reason=f'no design group {group!r} (one of {", ".join(DESIGN_GROUPS)})')
     prefix = f'{group}{DESIGN_MARK}'

@@ -3,7 +3,7 @@ law file, with the reason (and how to give it one) when it has none."""
 import pytest
 
 from rwpend_console.modes import LAW_HOW, MODE_HELP, mode_buttons
-from rwpend_control.supervisor import MODES
+from rwpend_control.parameters import MODES
 
 
 def by_mode(buttons):

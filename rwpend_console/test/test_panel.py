@@ -5,7 +5,8 @@ import math
 import pytest
 
 from rwpend_console.panel import Field, build_fields, coerce_value, design_preview
-from rwpend_control.supervisor import DESIGN_DEFAULTS, gains_from_design
+from rwpend_control.parameters import DESIGN_DEFAULTS
+from rwpend_control.supervisor import gains_from_design
 from rwpend_model.rig import load_rig
 
 DESCR = {

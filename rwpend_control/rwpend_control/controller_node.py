@@ -65,14 +65,13 @@ from rwpend_ros.trace import tracer
 from rwpend_ros.diagnostics import publish_diagnostic
 from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
-from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS
 from rwpend_ros.runner import run_node
 from rwpend_ros.simtime import sample_time
-from rwpend_control.parameters import DESIGNED, controller_specs
+from rwpend_control.parameters import (DESIGN_DEFAULTS, DESIGN_GROUPS, DESIGNED, MODES, PARAM_FIELDS,
+                                       controller_specs, design_group)
 from rwpend_control.user_law import LawError, load_law
-from rwpend_control.supervisor import (STALE_FAULT, DESIGN_DEFAULTS, DESIGN_GROUPS, MODES, PARAM_FIELDS,
-                                       Controller, ControllerConfig, Status, design_group, gains_from_design)
+from rwpend_control.supervisor import STALE_FAULT, Controller, ControllerConfig, Status, gains_from_design
 #: Period of the stale-state check (s, steady clock): the controller notices a silent state
 #: stream within state_timeout_samples h + this.  The plant's own command timeout zeros the
 #: motor within its timeout regardless.
@@ -112,7 +111,7 @@ class ControllerNode(RwNode):
         ok, reason, cfg = self.ctrl.check_params(values)
         if not ok:
             raise ConfigError(f'controller parameters: {reason}')
-        self.ctrl = Controller(self.rig, cfg, user_law=self._load_user_law())
+        self.ctrl = Controller(self.rig, cfg, user_law=self._load_user_law(p['law.file'], p['law.params']))
         for r in self.set_parameters([Parameter(n, value=float(values[n])) for n in sorted(DESIGNED)]):
             if not r.successful:
                 raise ConfigError(f'designed gains: {r.reason}')
@@ -193,16 +192,8 @@ class ControllerNode(RwNode):
             raise ConfigError(f'controller_id must be an integer in 0..2^63-1, got {value!r}')
         return value or secrets.randbits(63) | 1
 
-    def _load_user_law(self):
-        """The law of mode ``law`` from ``law.file`` / ``law.params`` (None when no file)."""
-        v = self.param_table.declare([
-            ParamSpec('law.file', '', "a law of one's own for mode 'law': a .py file or "
-                      'package.module:Name (rwpend_control.user_law); empty: none', read_only=True),
-            # default '' (= no values), not '{}': ros2cli's `param load` reads a dumped '{}' as a
-            # YAML mapping and cannot build the request (rclpy: "bad argument type")
-            ParamSpec('law.params', '', 'a JSON object of the values the law gets (empty: none)',
-                      read_only=True)])
-        source, params = v['law.file'], v['law.params']
+    def _load_user_law(self, source: str, params: str):
+        """The law of mode ``law`` from the values of ``law.file`` / ``law.params`` (None when no file)."""
         if not source:
             return None
         try:

@@ -73,16 +73,17 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any, Mapping
 
 from . import design
 from .design import Gains
-from .laws import (FRICTION_MODES, Balance, EnergySwingUp, FrictionCompensation, WheelAnglePD,
-                   WheelVelocityPI, upright_deviation)
+from .laws import (Balance, EnergySwingUp, FrictionCompensation, WheelAnglePD, WheelVelocityPI,
+                   upright_deviation)
+from .parameters import (BY_NAME, CONFIG_PARAMS, DESIGN_DEFAULTS, DESIGN_GROUPS, MAX_ANGLE, MODES,
+                         PARAM_FIELDS, lumped_lag, range_refusal, type_refusal)
 from .user_law import LawError, LawState
-from .safety import (BRAKE_DONE_SPEED, SATURATION_ACTIONS, WHEEL_SPEED_ACTIONS, StateWatchdog, brake,
-                     motor_speed)
+from .safety import BRAKE_DONE_SPEED, StateWatchdog, brake, motor_speed
 
 #: how the fault of a sample the controller answered without a fresh state begins (readers of
 #: controller/status tell the loop's faults from a law's by it)
@@ -94,12 +95,10 @@ BAD_STATE_FAULT = 'bad state'
 #: s of silence of the state stream after which its return starts the mode afresh (module doc);
 #: shorter stale episodes are answered with u = 0 and the law goes on
 FRESH_START_GAP = 0.05
-MODES = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'auto', 'law')
 LAWS = ('off', 'wheel_velocity', 'wheel_angle', 'balance', 'swingup', 'catch', 'brake', 'law')
 
 #: Limits of a sane state estimate; beyond them the sample is refused (u = 0, fault).
 MAX_THETA_DOT = 200.0       # rad/s (a fall from upright reaches 2 omega_p = 18 rad/s)
-MAX_ANGLE = 1e7             # rad, multi-turn angles
 MAX_FRICTION = 100.0        # control units
 MAX_SEQ = 2**64 - 1         # seq is a uint64
 
@@ -141,59 +140,34 @@ class Status:
     note: str = ''         # the state stream recovered / restarted on this sample
 
 
-@dataclass(frozen=True)
-class ControllerConfig:
-    """Every tunable of the controller; the field names map to the node's parameters
-    (``balance_kpp`` <-> ``balance.kpp``, see :data:`PARAM_FIELDS`)."""
+def _table_fields(cls):
+    """``cls`` with one field per configuration row of the parameter table
+    (:data:`rwpend_control.parameters.CONFIG_PARAMS`), its default the row's; then @dataclass."""
+    cls.__annotations__ = {p.field: type(p.default).__name__ for p in CONFIG_PARAMS}
+    for p in CONFIG_PARAMS:
+        setattr(cls, p.field, p.default)
+    return cls
 
-    balance_kpp: float = -282.0
-    balance_kdp: float = -25.4
-    balance_kpr: float = 0.0
-    balance_kdr: float = -0.0302
-    balance_rate_ref: float = 0.0
-    patch_kpp: float = -389.8
-    patch_kdp: float = -44.0
-    patch_kdr: float = -0.1006
-    swingup_c_e: float = 1.356e5
-    swingup_c_v: float = 1.6
-    swingup_kick: float = 10.0
-    wheel_kp: float = 0.2
-    wheel_ki: float = 0.002
-    wheel_ref: float = 0.0
-    wheel_angle_kpr: float = 0.5
-    wheel_angle_kdr: float = 0.07
-    wheel_angle_ref: float = 0.0
-    theta_s: float = 0.5
-    theta_0: float = 0.8
-    catch_region: bool = False
-    friction_compensation: str = 'off'
-    friction_deadband: float = 1.0
-    allow_wheel_drift: bool = False
-    # safety (rwpend_control.safety)
-    state_timeout_samples: int = 3
-    wheel_speed_limit: float = 750.0
-    wheel_speed_action: str = 'brake'
-    max_saturation_time: float = 0.5
-    saturation_action: str = 'off'
+
+@dataclass(frozen=True)
+@_table_fields
+class ControllerConfig:
+    """Every tunable of the controller: one field per row of the parameter table with ``config``
+    (:mod:`rwpend_control.parameters`; ``balance.kpp`` <-> ``balance_kpp``), its default the row's."""
 
     @classmethod
     def designed(cls, rig, **overrides: Any) -> 'ControllerConfig':
-        """The default configuration designed for ``rig`` (then ``overrides`` by field name).
-
-        balance = pddcontrol(1.5 omega_p, 0.707, 0.2) (4.11); patch = pddcontrolwpatch(1.5 omega_p,
-        0.707) (Section 6.3, the gains of Fig. 6.3); swing-up c_e, c_v from k_e = 4000, k_v = 4,
-        k_u = 0.4 (E34); wheel PI omega0 = 20 rad/s, zeta = 1 (3.15-3.16); wheel-angle PD
-        omega0 = 10 rad/s, zeta = 0.707 (3.18).
+        """The default configuration designed for ``rig`` (then ``overrides`` by field name): each
+        design group from the defaults of its design parameters (the table's): balance =
+        pddcontrol(1.5 omega_p, 0.707, 0.2) (4.11); patch = pddcontrolwpatch(1.5 omega_p, 0.707)
+        (Section 6.3, the gains of Fig. 6.3); swing-up c_e, c_v from k_e = 4000, k_v = 4, k_u = 0.4
+        (E34); wheel PI omega0 = 20 rad/s, zeta = 1 (3.15-3.16); wheel-angle PD omega0 = 10 rad/s,
+        zeta = 0.707 (3.18); the swing-up's kick u_max.
         """
-        b = design.pddcontrol(rig, '1.5wp', 0.707, 0.2)
-        p = design.pddcontrolwpatch(rig, '1.5wp', 0.707)
-        c_e, c_v = design.swingup_gains(rig)
-        pi = design.pi_control(rig, 20.0, 1.0)
-        wa = design.wheel_pd(rig, 10.0, 0.707)
-        base = cls(balance_kpp=b.kpp, balance_kdp=b.kdp, balance_kpr=b.kpr, balance_kdr=b.kdr,
-                   patch_kpp=p.kpp, patch_kdp=p.kdp, patch_kdr=p.kdr,
-                   swingup_c_e=c_e, swingup_c_v=c_v, swingup_kick=rig.u_max,
-                   wheel_kp=pi.kdr, wheel_ki=pi.ki, wheel_angle_kpr=wa.kpr, wheel_angle_kdr=wa.kdr)
+        gains: dict[str, float] = {}
+        for group in DESIGN_GROUPS:
+            gains.update(gains_from_design(rig, group, {}))
+        base = config_with(cls(swingup_kick=rig.u_max), gains)
         return replace(base, **overrides) if overrides else base
 
     @property
@@ -203,75 +177,6 @@ class ControllerConfig:
     @property
     def patch_gains(self) -> Gains:
         return Gains(self.patch_kpp, self.patch_kdp, 0.0, self.patch_kdr)
-
-
-#: Node parameter name -> ControllerConfig field.
-PARAM_FIELDS: dict[str, str] = {
-    'balance.kpp': 'balance_kpp', 'balance.kdp': 'balance_kdp', 'balance.kpr': 'balance_kpr',
-    'balance.kdr': 'balance_kdr', 'balance.rate_ref': 'balance_rate_ref',
-    'patch.kpp': 'patch_kpp', 'patch.kdp': 'patch_kdp', 'patch.kdr': 'patch_kdr',
-    'swingup.c_e': 'swingup_c_e', 'swingup.c_v': 'swingup_c_v', 'swingup.kick': 'swingup_kick',
-    'wheel.kp': 'wheel_kp', 'wheel.ki': 'wheel_ki', 'wheel.ref': 'wheel_ref',
-    'wheel_angle.kpr': 'wheel_angle_kpr', 'wheel_angle.kdr': 'wheel_angle_kdr',
-    'wheel_angle.ref': 'wheel_angle_ref',
-    'theta_s': 'theta_s', 'theta_0': 'theta_0', 'catch_region': 'catch_region',
-    'friction_compensation': 'friction_compensation', 'friction_deadband': 'friction_deadband',
-    'allow_wheel_drift': 'allow_wheel_drift',
-    'state_timeout_samples': 'state_timeout_samples', 'wheel_speed_limit': 'wheel_speed_limit',
-    'wheel_speed_action': 'wheel_speed_action', 'max_saturation_time': 'max_saturation_time',
-    'saturation_action': 'saturation_action',
-}
-FIELD_PARAMS = {v: k for k, v in PARAM_FIELDS.items()}
-_BOOL_FIELDS = {'catch_region', 'allow_wheel_drift'}
-#: String fields and their allowed values.
-_CHOICES = {'friction_compensation': FRICTION_MODES, 'wheel_speed_action': WHEEL_SPEED_ACTIONS,
-            'saturation_action': SATURATION_ACTIONS}
-_STR_FIELDS = set(_CHOICES)
-_INT_FIELDS = {'state_timeout_samples'}
-
-
-def _num(name: str, v: Any) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ValueError(f'{name} must be a number, got {v!r}')
-    v = float(v)
-    if not math.isfinite(v):
-        raise ValueError(f'{name} must be finite, got {v!r}')
-    return v
-
-
-#: Design parameters (node parameter name -> default) used when the gains are not given.
-DESIGN_DEFAULTS: dict[str, Any] = {
-    'balance.design.kind': 'pdd',        # pdd (4.11), pdpd (4.15), pd (4.3), patch (6.3)
-    'balance.design.omega0': '1.5wp',
-    'balance.design.zeta': 0.707,
-    'balance.design.alpha': 0.2,         # pdd only
-    'balance.design.omega2': 'wp',       # pdpd only: the second pole pair
-    'balance.design.zeta2': 1.0,
-    'patch.design.omega0': '1.5wp',
-    'patch.design.zeta': 0.707,
-    'swingup.design.k_e': 4000.0,        # Section 5.3.1, read per ERRATA E34
-    'swingup.design.k_v': 4.0,
-    'swingup.design.k_u': 0.4,
-    'wheel.design.omega0': 20.0,         # PI (3.15)-(3.16)
-    'wheel.design.zeta': 1.0,
-    'wheel_angle.design.omega0': 10.0,   # PD (3.18)
-    'wheel_angle.design.zeta': 0.707,
-}
-#: Gain parameters computed by each design group.
-DESIGN_GROUPS: dict[str, tuple[str, ...]] = {
-    'balance': ('balance.kpp', 'balance.kdp', 'balance.kpr', 'balance.kdr'),
-    'patch': ('patch.kpp', 'patch.kdp', 'patch.kdr'),
-    'swingup': ('swingup.c_e', 'swingup.c_v'),
-    'wheel': ('wheel.kp', 'wheel.ki'),
-    'wheel_angle': ('wheel_angle.kpr', 'wheel_angle.kdr'),
-}
-
-
-def design_group(name: str) -> str | None:
-    """The design group a design parameter belongs to (``balance.design.zeta`` -> ``balance``)."""
-    if name in DESIGN_DEFAULTS:
-        return name.split('.design.', 1)[0]
-    return None
 
 
 def gains_from_design(rig, group: str, spec: Mapping[str, Any]) -> dict[str, float]:
@@ -308,76 +213,17 @@ def gains_from_design(rig, group: str, spec: Mapping[str, Any]) -> dict[str, flo
     raise ValueError(f'unknown design group {group!r}')
 
 
-def param_limits(rig) -> dict[str, tuple[float, float]]:
-    """[low, high] (inclusive) of each numeric controller parameter for ``rig``; validate_config
-    refuses values outside (wheel_speed_limit, below the cut-off, is judged there on its own).
-
-    The wheel loops' gains: lumped lag T_e = motor lag + h/2 (Section 3.5); kdr b_r T_e <= 1
-    (E14: the sampled loop goes unstable a few times above).
-    """
-    t_e = rig.motor_time_constant + 0.5 * rig.sample_period
-    kd_max = 1.0 / (rig.b_r * t_e)
-    limits = {}
-    for g in ('balance', 'patch'):
-        limits[f'{g}.kpp'] = (-1e4, 1e4)
-        limits[f'{g}.kdp'] = (-1e3, 1e3)
-        limits[f'{g}.kdr'] = (-100.0, 100.0)
-    limits.update({
-        'balance.kpr': (-100.0, 100.0),
-        'balance.rate_ref': (-rig.omega_max, rig.omega_max),
-        'swingup.c_e': (0.0, 1e8),
-        'swingup.c_v': (0.0, 100.0),
-        'swingup.kick': (0.0, rig.u_max),
-        'wheel.kp': (0.0, kd_max),
-        'wheel.ki': (0.0, 1.0),
-        'wheel.ref': (-0.9 * rig.omega_max, 0.9 * rig.omega_max),
-        'wheel_angle.kpr': (0.0, 100.0),
-        'wheel_angle.kdr': (0.0, kd_max),
-        'wheel_angle.ref': (-MAX_ANGLE, MAX_ANGLE),
-        'theta_s': (1e-3, math.pi),
-        'theta_0': (1e-3, math.pi),
-        'friction_deadband': (0.0, 100.0),
-        'state_timeout_samples': (1, 1000),
-        'max_saturation_time': (rig.sample_period, 60.0),
-    })
-    return limits
-
-
 def validate_config(cfg: ControllerConfig, rig) -> list[str]:
-    """Reasons why ``cfg`` is unacceptable for ``rig`` (empty when fine)."""
-    errors: list[str] = []
-    p = FIELD_PARAMS
-    for f in fields(cfg):
-        v = getattr(cfg, f.name)
-        if f.name in _BOOL_FIELDS:
-            if not isinstance(v, bool):
-                errors.append(f'{p[f.name]} must be a bool, got {v!r}')
-        elif f.name in _STR_FIELDS:
-            if not isinstance(v, str) or v not in _CHOICES[f.name]:
-                errors.append(f'{p[f.name]} must be one of {", ".join(_CHOICES[f.name])}, got {v!r}')
-        elif f.name in _INT_FIELDS:
-            if isinstance(v, bool) or not isinstance(v, int):
-                errors.append(f'{p[f.name]} must be an integer, got {v!r}')
-        else:
-            try:
-                _num(p[f.name], v)
-            except ValueError as exc:
-                errors.append(str(exc))
+    """Reasons why ``cfg`` is unacceptable for ``rig`` (empty when fine): first each value's type,
+    then its range (its row of :data:`rwpend_control.parameters.PARAMS`), then what joins values."""
+    values = [(p, getattr(cfg, p.field)) for p in CONFIG_PARAMS]
+    errors = [e for e in (type_refusal(p, v) for p, v in values) if e]
     if errors:
         return errors
-
-    for pname, (lo, hi) in param_limits(rig).items():
-        v = getattr(cfg, PARAM_FIELDS[pname])
-        if not lo <= v <= hi:
-            errors.append(f'{pname} = {v:g} out of range [{lo:g}, {hi:g}]')
-    t_e = rig.motor_time_constant + 0.5 * rig.sample_period
-    # below the back-EMF cut-off omega_max = V_max/k_m (2.13), beyond which no braking torque
-    # along the motion can be produced any more
-    if not 1.0 <= cfg.wheel_speed_limit < rig.omega_max:
-        errors.append(f'wheel_speed_limit = {cfg.wheel_speed_limit:g} rad/s must be in [1, '
-                      f'{rig.omega_max:.1f}) (below the back-EMF cut-off V_max/k_m, (2.13))')
+    errors = [e for e in (range_refusal(p, v, rig) for p, v in values) if e]
     if errors:
         return errors
+    t_e = lumped_lag(rig)
     if abs(cfg.wheel_ref) >= cfg.wheel_speed_limit:
         errors.append(f'wheel.ref = {cfg.wheel_ref:g} rad/s must stay below wheel_speed_limit = '
                       f'{cfg.wheel_speed_limit:g} rad/s')
@@ -400,17 +246,17 @@ def validate_config(cfg: ControllerConfig, rig) -> list[str]:
 
 
 def config_with(cfg: ControllerConfig, values: Mapping[str, Any]) -> ControllerConfig:
-    """``cfg`` with values given by parameter name (``balance.kpp``) or field name; ValueError on unknown."""
+    """``cfg`` with values given by parameter name (``balance.kpp``) or field name; ValueError on
+    unknown. An integer given for a number (a double row) is taken as a float."""
     changes = {}
-    names = {f.name for f in fields(cfg)}
+    rows = {p.field: p for p in CONFIG_PARAMS}
     for key, v in values.items():
-        name = PARAM_FIELDS.get(key, key)
-        if name not in names:
+        row = BY_NAME.get(key) if key in PARAM_FIELDS else rows.get(key)
+        if row is None:
             raise ValueError(f'unknown controller parameter {key!r}')
-        if name not in _BOOL_FIELDS and name not in _STR_FIELDS and name not in _INT_FIELDS \
-                and isinstance(v, int) and not isinstance(v, bool):
+        if row.kind == 'double' and isinstance(v, int) and not isinstance(v, bool):
             v = float(v)
-        changes[name] = v
+        changes[row.field] = v
     return replace(cfg, **changes)
 
 

@@ -20,8 +20,8 @@ from dataclasses import dataclass, field, fields, replace
 from functools import lru_cache
 from typing import Any, Mapping
 
-from rwpend_control.supervisor import (DESIGN_DEFAULTS, DESIGN_GROUPS, PARAM_FIELDS, ControllerConfig,
-                                       config_with, gains_from_design, validate_config)
+from rwpend_control.parameters import DESIGN_DEFAULTS, DESIGN_GROUPS, DESIGNED, PARAM_FIELDS
+from rwpend_control.supervisor import ControllerConfig, config_with, gains_from_design, validate_config
 from rwpend_estimation.estimators import EstimatorConfig
 from rwpend_model.rig import SAMPLE_PERIOD_LIMITS, Rig, load_rig, read_params_file
 
@@ -88,7 +88,7 @@ def controller_config(model: Rig, given: Mapping[str, Any]) -> ControllerConfig:
     gains not given are designed from the design parameters, then everything is validated
     (ValueError with the reason) -- the steps of ControllerNode.__init__."""
     base = ControllerConfig()
-    values = {n: given.get(n, None if n in _designed() else getattr(base, PARAM_FIELDS[n]))
+    values = {n: given.get(n, None if n in DESIGNED else getattr(base, PARAM_FIELDS[n]))
               for n in PARAM_FIELDS}
     designs = {n: given.get(n, d) for n, d in DESIGN_DEFAULTS.items()}
     for group, names in DESIGN_GROUPS.items():
@@ -107,11 +107,6 @@ def controller_config(model: Rig, given: Mapping[str, Any]) -> ControllerConfig:
     if errors:
         raise ValueError('; '.join(errors))
     return cfg
-
-
-@lru_cache(maxsize=1)
-def _designed() -> frozenset:
-    return frozenset(n for names in DESIGN_GROUPS.values() for n in names)
 
 
 def split(values: Mapping[str, Any]) -> dict[str, dict]:

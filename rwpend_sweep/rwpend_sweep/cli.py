@@ -54,7 +54,7 @@ def parser() -> argparse.ArgumentParser:
 
 def load_entry(text: str):
     """A controller of --compare (SpecError with the reason)."""
-    from rwpend_control.supervisor import DESIGN_DEFAULTS, PARAM_FIELDS
+    from rwpend_control.parameters import DESIGN_DEFAULTS, PARAM_FIELDS
     from rwpend_model.rig import read_params_file
     from .study import Entry
     if text == 'default':

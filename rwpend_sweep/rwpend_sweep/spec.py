@@ -1,7 +1,7 @@
 """A study: one scenario x axes, read from a YAML file and checked before anything runs (pure).
 
     scenario:
-      mode: auto                 # the controller's mode at start (supervisor.MODES)
+      mode: auto                 # the controller's mode at start (rwpend_control.parameters.MODES)
       duration: 10               # simulated seconds of every run
       initial: {theta: 0.0}      # any of theta, theta_dot, wheel_angle, wheel_rate (rad, rad/s)
       taps: [{t: 6.0, dv: 0.5}]                      # scripted taps (theta_dot += dv at t)
@@ -188,7 +188,7 @@ def check_axis_name(key: str, name: Any) -> None:
     from dataclasses import fields as dc_fields
     from rwpend_estimation.estimators import EstimatorConfig
     from rwpend_model.rig import Rig
-    from rwpend_control.supervisor import DESIGN_DEFAULTS, PARAM_FIELDS
+    from rwpend_control.parameters import DESIGN_DEFAULTS, PARAM_FIELDS
     if not isinstance(name, str):
         raise SpecError(f'{key}: an axis name must be text, got {name!r}')
     head, _, rest = name.partition('.')
@@ -282,7 +282,7 @@ def _events(key: str, v: Any, fields_: tuple) -> tuple:
 
 
 def _scenario(v: Any) -> Scenario:
-    from rwpend_control.supervisor import MODES
+    from rwpend_control.parameters import MODES
     m = _mapping('scenario', v if v is not None else {}, SCENARIO_KEYS)
     mode = m.get('mode', 'auto')
     if mode not in MODES:
