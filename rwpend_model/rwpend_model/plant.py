@@ -120,7 +120,7 @@ class Plant:
         self.disturbance = 0.0
         self.t = 0.0
         self.u_held = 0.0
-        self._free = None               # the sub-step of free motion (_free_substep) ...
+        self._free = None               # the sub-steps of free motion (_free_run) ...
         self._free_for = None           # ... made for this disturbance
 
     # ------------------------------------------------------------------ inputs
@@ -190,7 +190,7 @@ class Plant:
         """One RK4 sub-step of dt of the rotor turning freely (not stuck): (theta, theta',
         theta_r, theta_r') after it, with the motor torque tau0, tau_mid, tau1 at its start,
         middle and end (the lag's exact response).  The plain form, through :meth:`_deriv`
-        (2.15); :meth:`_free_substep` is the same arithmetic without the calls."""
+        (2.15); :meth:`_free_run` does the same arithmetic without the calls."""
         dt = self._dt
 
         def d(th, thd, thrd, tau):
@@ -206,100 +206,127 @@ class Plant:
         thrd += dt / 6.0 * (r1 + 2 * r2 + 2 * r3 + r4)
         return th, thd, thr, thrd
 
-    def _free_substep(self):
-        """:meth:`_free_substep_plain` with the rig's constants and this sample's disturbance
-        bound and the derivative (2.15) written out at each of the four RK4 stages: the same
-        arithmetic in the same order, bit for bit (a test compares them), without 4 calls, 4
-        tuples and ~40 attribute look-ups per sub-step (the integrator's hot path: 5 sub-steps
-        a sample at h = 1 ms).  The constants products (0.5 dt, dt/6 ...) are those the plain
-        form computes first (Python evaluates a * b * c as (a * b) * c).  Each stage: the
-        back-EMF cut-off (2.13), the friction (3.17) at w_rel, then (2.15)."""
+    def _free_run_plain(self, th, thd, thr, thrd, tau0, u, n):
+        """Up to ``n`` sub-steps of free motion from the motor torque tau0 with the command u
+        held: (theta, theta', theta_r, theta_r', tau, sub-steps done, crossed).  Stops after a
+        sub-step in which the relative speed w_rel reached or crossed zero with friction on
+        (crossed: the caller decides whether the rotor sticks, (3.17)).  The plain form,
+        through :meth:`_free_substep_plain`; :meth:`_free_run` is the same arithmetic."""
+        for j in range(1, n + 1):
+            # motor current lag: exact exponential response to the held command
+            tau_mid = u + (tau0 - u) * self._half_decay
+            tau1 = u + (tau0 - u) * self._decay
+            w0 = thrd - thd
+            th, thd, thr, thrd = self._free_substep_plain(th, thd, thr, thrd, tau0, tau_mid, tau1)
+            tau0 = tau1
+            w1 = thrd - thd
+            if self.friction_on and (w0 == 0.0 or w1 == 0.0 or (w0 > 0.0) != (w1 > 0.0)):
+                return th, thd, thr, thrd, tau0, j, True
+        return th, thd, thr, thrd, tau0, n, False
+
+    def _free_run(self):
+        """:meth:`_free_run_plain` with the rig's constants and this sample's disturbance bound
+        and the sub-step written out, its derivative (2.15) at each of the four RK4 stages:
+        the same arithmetic in the same order, bit for bit (tests compare them), without a call,
+        4 calls of _deriv, 5 tuples and ~40 attribute look-ups per sub-step (the integrator's
+        hot path: 5 sub-steps a sample at h = 1 ms).  The products of constants (0.5 dt, dt/6
+        ...) are those the plain form computes first (a * b * c is (a * b) * c).  Each stage:
+        the back-EMF cut-off (2.13), the friction (3.17) at w_rel, then (2.15)."""
         if self.bracket:
-            return self._free_substep_plain
+            return self._free_run_plain
         sin = math.sin
         na, bp, cp, br = -self._a, self._bp, self._cp, self._br
         push = bp * self.disturbance
         emf, wmax, nwmax = self.back_emf, self._wmax, -self._wmax
         fr = self.friction_on
         cpos, vpos, ncneg, vneg = self._cpos, self._vpos, -self._cneg, self._vneg
-        dt = self._dt
+        dt, decay, half_decay = self._dt, self._decay, self._half_decay
         hdt, qdt2, hdt2, dt6 = 0.5 * dt, 0.25 * dt * dt, 0.5 * dt * dt, dt / 6.0
 
-        def substep(th, thd, thr, thrd, tau0, tau_mid, tau1):
-            w = thrd - thd
-            g = ((0.0 if emf and ((tau0 > 0.0 and w > wmax) or (tau0 < 0.0 and w < nwmax)) else tau0)
-                 - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
-            a1, r1 = na * sin(th) + push - cp * thd - bp * g, br * g
-            x, v, wr = th + hdt * thd, thd + hdt * a1, thrd + hdt * r1
-            w = wr - v
-            g = ((0.0 if emf and ((tau_mid > 0.0 and w > wmax) or (tau_mid < 0.0 and w < nwmax)) else tau_mid)
-                 - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
-            a2, r2 = na * sin(x) + push - cp * v - bp * g, br * g
-            x, v, wr = x + qdt2 * a1, thd + hdt * a2, thrd + hdt * r2
-            w = wr - v
-            g = ((0.0 if emf and ((tau_mid > 0.0 and w > wmax) or (tau_mid < 0.0 and w < nwmax)) else tau_mid)
-                 - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
-            a3, r3 = na * sin(x) + push - cp * v - bp * g, br * g
-            x, v, wr = th + dt * thd + hdt2 * a2, thd + dt * a3, thrd + dt * r3
-            w = wr - v
-            g = ((0.0 if emf and ((tau1 > 0.0 and w > wmax) or (tau1 < 0.0 and w < nwmax)) else tau1)
-                 - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
-            a4, r4 = na * sin(x) + push - cp * v - bp * g, br * g
-            return (th + dt * (thd + dt6 * (a1 + a2 + a3)), thd + dt6 * (a1 + 2 * a2 + 2 * a3 + a4),
-                    thr + dt * (thrd + dt6 * (r1 + r2 + r3)), thrd + dt6 * (r1 + 2 * r2 + 2 * r3 + r4))
-        return substep
+        def run(th, thd, thr, thrd, tau0, u, n):
+            for j in range(1, n + 1):
+                tau_mid = u + (tau0 - u) * half_decay
+                tau1 = u + (tau0 - u) * decay
+                w0 = w = thrd - thd
+                g = ((0.0 if emf and ((tau0 > 0.0 and w > wmax) or (tau0 < 0.0 and w < nwmax)) else tau0)
+                     - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
+                a1, r1 = na * sin(th) + push - cp * thd - bp * g, br * g
+                x, v, wr = th + hdt * thd, thd + hdt * a1, thrd + hdt * r1
+                w = wr - v
+                g = ((0.0 if emf and ((tau_mid > 0.0 and w > wmax) or (tau_mid < 0.0 and w < nwmax)) else tau_mid)
+                     - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
+                a2, r2 = na * sin(x) + push - cp * v - bp * g, br * g
+                x, v, wr = x + qdt2 * a1, thd + hdt * a2, thrd + hdt * r2
+                w = wr - v
+                g = ((0.0 if emf and ((tau_mid > 0.0 and w > wmax) or (tau_mid < 0.0 and w < nwmax)) else tau_mid)
+                     - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
+                a3, r3 = na * sin(x) + push - cp * v - bp * g, br * g
+                x, v, wr = th + dt * thd + hdt2 * a2, thd + dt * a3, thrd + dt * r3
+                w = wr - v
+                g = ((0.0 if emf and ((tau1 > 0.0 and w > wmax) or (tau1 < 0.0 and w < nwmax)) else tau1)
+                     - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
+                a4, r4 = na * sin(x) + push - cp * v - bp * g, br * g
+                th, thd, thr, thrd = (th + dt * (thd + dt6 * (a1 + a2 + a3)),
+                                      thd + dt6 * (a1 + 2 * a2 + 2 * a3 + a4),
+                                      thr + dt * (thrd + dt6 * (r1 + r2 + r3)),
+                                      thrd + dt6 * (r1 + 2 * r2 + 2 * r3 + r4))
+                tau0 = tau1
+                w = thrd - thd
+                if fr and (w0 == 0.0 or w == 0.0 or (w0 > 0.0) != (w > 0.0)):
+                    return th, thd, thr, thrd, tau0, j, True
+            return th, thd, thr, thrd, tau0, n, False
+        return run
+
+    def _stuck_substep(self, th, thd, thr, tau0, u):
+        """One RK4 sub-step of the rotor stuck to the pendulum, one rigid body (Section 2.3):
+        theta integrated, the rotor follows; (theta, theta', theta_r, theta_r', tau) after it."""
+        dt = self._dt
+        tau_mid = u + (tau0 - u) * self._half_decay
+        tau1 = u + (tau0 - u) * self._decay
+        d = self._deriv
+        k1 = d(th, thd, thd, tau0, True)[0]
+        k2 = d(th + 0.5 * dt * thd, thd + 0.5 * dt * k1, 0.0, tau_mid, True)[0]
+        k3 = d(th + 0.5 * dt * (thd + 0.5 * dt * k1), thd + 0.5 * dt * k2, 0.0, tau_mid, True)[0]
+        k4 = d(th + dt * (thd + 0.5 * dt * k2), thd + dt * k3, 0.0, tau1, True)[0]
+        dth = dt * (thd + dt / 6.0 * (k1 + k2 + k3))
+        thd_new = thd + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return th + dth, thd_new, thr + dth, thd_new, tau1
 
     def _required_friction(self, th, thd, tau):
         """Friction (units) the bearing must supply to keep the rotor stuck."""
         return self._deriv(th, thd, thd, tau, True)[2]
 
     def step(self, u: float = 0.0) -> None:
-        """Advance one sample period h with the command u held (ZOH)."""
+        """Advance one sample period h with the command u held (ZOH): sub-steps of RK4 stuck
+        (:meth:`_stuck_substep`) or free (:meth:`_free_run`), switching between them at the
+        sub-step boundaries (stick/slip events)."""
         u = self.quantize_command(u)
         self.u_held = u
         if self.rotor_locked:
             self._step_locked(u)
             return
-        dt = self._dt
-        decay, half_decay = self._decay, self._half_decay
         th, thd, thr, thrd = self._x
         # with the lag the torque is continuous; without it the ZOH torque jumps to u at t_k
         # (starting from the previous sample's torque would lose 1/6 of the first sub-step)
         tau0 = self._tau if self._te > 0 else u
         stuck = self._stuck
         fb = self._fbreak
-        free = None          # the sub-step of free motion (_free_substep), fetched when first needed
-        for _ in range(self._n):
-            # motor current lag: exact exponential response to the held command
-            tau_mid = u + (tau0 - u) * half_decay
-            tau1 = u + (tau0 - u) * decay
+        n, k = self._n, 0
+        while k < n:
             if stuck and abs(self._required_friction(th, thd, tau0)) > fb:
                 stuck = False
             if stuck:
-                # one rigid body: integrate theta with RK4, the rotor follows
-                d = self._deriv
-                k1 = d(th, thd, thd, tau0, True)[0]
-                k2 = d(th + 0.5 * dt * thd, thd + 0.5 * dt * k1, 0.0, tau_mid, True)[0]
-                k3 = d(th + 0.5 * dt * (thd + 0.5 * dt * k1), thd + 0.5 * dt * k2, 0.0, tau_mid, True)[0]
-                k4 = d(th + dt * (thd + 0.5 * dt * k2), thd + dt * k3, 0.0, tau1, True)[0]
-                dth = dt * (thd + dt / 6.0 * (k1 + k2 + k3))
-                thd_new = thd + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-                th += dth
-                thr += dth
-                thd = thrd = thd_new
-            else:
-                free = free or self._free_motion()
-                w0 = thrd - thd
-                th, thd, thr, thrd = free(th, thd, thr, thrd, tau0, tau_mid, tau1)
-                w1 = thrd - thd
-                if self.friction_on and (w0 == 0.0 or w1 == 0.0 or (w0 > 0.0) != (w1 > 0.0)):
-                    # relative speed crossed zero: stick if the bearing can hold the rotor
-                    if abs(self._required_friction(th, thd, tau1)) <= fb:
-                        j_ratio = 1.0 if self.bracket else self._stuck_gain   # J / (J + J_r)
-                        v = j_ratio * thd + (1.0 - j_ratio) * thrd   # momentum-conserving
-                        thd = thrd = v
-                        stuck = True
-            tau0 = tau1
+                th, thd, thr, thrd, tau0 = self._stuck_substep(th, thd, thr, tau0, u)
+                k += 1
+                continue
+            th, thd, thr, thrd, tau0, done, crossed = self._free_motion()(th, thd, thr, thrd, tau0, u, n - k)
+            k += done
+            # relative speed crossed zero: stick if the bearing can hold the rotor
+            if crossed and abs(self._required_friction(th, thd, tau0)) <= fb:
+                j_ratio = 1.0 if self.bracket else self._stuck_gain   # J / (J + J_r)
+                v = j_ratio * thd + (1.0 - j_ratio) * thrd   # momentum-conserving
+                thd = thrd = v
+                stuck = True
         self._x = [th, thd, thr, thrd]
         self._tau = tau0
         self._stuck = stuck
@@ -313,10 +340,10 @@ class Plant:
         self.t += self.h
 
     def _free_motion(self):
-        """:meth:`_free_substep` for the current disturbance, made once for each value it takes
+        """:meth:`_free_run` for the current disturbance, made once for each value it takes
         (a torque pulse changes it; the rig's constants do not change)."""
         if self._free is None or self._free_for is not self.disturbance:
-            self._free = self._free_substep()
+            self._free = self._free_run()
             self._free_for = self.disturbance
         return self._free
 
@@ -337,10 +364,13 @@ class Plant:
     # ------------------------------------------------------------------ outputs
     @property
     def state(self) -> PlantState:
+        return PlantState(*self.state_values())
+
+    def state_values(self) -> tuple[float, float, float, float, float, float, bool]:
+        """The fields of :attr:`state` in its order (theta, theta_dot, wheel_angle, wheel_rate,
+        torque, friction, stuck), without the object (the simulator reads them every sample)."""
         th, thd, thr, thrd = self._x
-        return PlantState(theta=th, theta_dot=thd, wheel_angle=thr, wheel_rate=thrd,
-                          torque=self._torque_available(self._tau, thrd - thd),
-                          friction=self._friction, stuck=self._stuck)
+        return th, thd, thr, thrd, self._torque_available(self._tau, thrd - thd), self._friction, self._stuck
 
     def counts(self) -> tuple[int, int]:
         """Encoder readings (pendulum_counts, motor_counts) (2.1)-(2.2), rounded to a count."""

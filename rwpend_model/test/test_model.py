@@ -188,38 +188,43 @@ def _bits(values) -> list:
 
 
 @pytest.mark.parametrize('back_emf, friction', [(True, True), (False, True), (True, False)])
-def test_free_substep_is_the_plain_substep_bit_for_bit(back_emf, friction):
-    """Plant._free_substep (the integrator's fast path: (2.15) written out at each RK4 stage)
-    gives exactly what the plain sub-step through _deriv gives, disturbance, the back-EMF
-    cut-off (2.13) and zero relative speed included."""
+def test_free_run_is_the_plain_substeps_bit_for_bit(back_emf, friction):
+    """Plant._free_run (the integrator's fast path: the RK4 sub-steps with (2.15) written out
+    at each stage) gives exactly what the plain sub-steps through _deriv give: the states, the
+    torque of the lag, where it stops at a zero of the relative speed; disturbance, the
+    back-EMF cut-off (2.13) and zero relative speed included."""
     import random
     p = Plant(load_rig(), back_emf=back_emf, friction=friction)
     p.disturbance = 0.37
-    fast = p._free_substep()
+    fast = p._free_run()
     rnd = random.Random(3)
+    stops = 0
     for _ in range(3000):
         th, thd, thr, thrd = (rnd.uniform(-7, 7), rnd.uniform(-30, 30), rnd.uniform(-50, 50),
                               rnd.uniform(-1000, 1000))
-        tau0, tau_mid, tau1 = (rnd.uniform(-12, 12) for _ in range(3))
+        if rnd.random() < 0.3:
+            thrd = thd + rnd.uniform(-0.05, 0.05)     # about to cross zero relative speed
         if rnd.random() < 0.05:
             thrd = thd          # zero relative speed: no kinetic friction
-        if rnd.random() < 0.05:
-            tau0 = tau_mid = tau1 = 0.0
-        args = (th, thd, thr, thrd, tau0, tau_mid, tau1)
-        assert _bits(fast(*args)) == _bits(p._free_substep_plain(*args))
+        tau0, u = rnd.uniform(-12, 12), rnd.choice([0.0, rnd.uniform(-12, 12)])
+        args = (th, thd, thr, thrd, tau0, u, rnd.randint(1, 5))
+        got = fast(*args)
+        assert _bits(got) == _bits(p._free_run_plain(*args))
+        stops += got[-1]
+    assert stops > 100 if friction else stops == 0
 
 
 @pytest.mark.parametrize('kwargs', [{}, {'back_emf': False}, {'friction': False}, {'motor_lag': False},
                                     {'theta': 3.1, 'wheel_rate': 700.0}, {'wheel_rate': 900.0},
                                     {'bracket': True, 'wheel_rate': 5.0}])
 def test_step_is_the_plain_integration_bit_for_bit(kwargs):
-    """Plant.step through the fast sub-step (made once per disturbance, the lag's decays made
-    once) gives the states of the same step through the plain sub-step, sample for sample:
+    """Plant.step through the fast sub-steps (made once per disturbance, the lag's decays made
+    once) gives the states of the same step through the plain sub-steps, sample for sample:
     stick and slip (3.17), taps and torque pulses included."""
     import random
     rig = load_rig()
     fast, plain = Plant(rig, **kwargs), Plant(rig, **kwargs)
-    plain._free_motion = lambda: plain._free_substep_plain
+    plain._free_motion = lambda: plain._free_run_plain
     rnd = random.Random(5)
     for k in range(3000):
         u = rnd.choice([0.0, rnd.uniform(-12, 12), rnd.uniform(-0.5, 0.5)])
