@@ -205,6 +205,16 @@ class Truth:
     timed_out: bool
     command_seq: int
 
+    def __init__(self, theta: float, theta_dot: float, wheel_angle: float, wheel_rate: float,
+                 u_applied: float, torque: float, friction: float, disturbance: float, stuck: bool,
+                 timed_out: bool, command_seq: int) -> None:
+        # the generated __init__ of a frozen dataclass sets each field through object.__setattr__
+        # (twice the time); made every sample (SimHardware.read)
+        d = self.__dict__
+        d['theta'], d['theta_dot'], d['wheel_angle'], d['wheel_rate'] = theta, theta_dot, wheel_angle, wheel_rate
+        d['u_applied'], d['torque'], d['friction'], d['disturbance'] = u_applied, torque, friction, disturbance
+        d['stuck'], d['timed_out'], d['command_seq'] = stuck, timed_out, command_seq
+
 
 @dataclass(frozen=True)
 class Reading:
@@ -216,6 +226,13 @@ class Reading:
     #: the command held over [t_k-1, t_k), saturated: the u of the observers (3.5)/(7.1)
     u_prev: float
     truth: Optional[Truth] = None
+
+    def __init__(self, seq: int, pendulum_counts: int, motor_counts: int, u_prev: float,
+                 truth: Optional[Truth] = None) -> None:
+        # as Truth.__init__: the fields stored directly, made every sample
+        d = self.__dict__
+        d['seq'], d['pendulum_counts'], d['motor_counts'], d['u_prev'], d['truth'] = \
+            seq, pendulum_counts, motor_counts, u_prev, truth
 
 
 class SimHardware:
@@ -238,9 +255,9 @@ class SimHardware:
         core = self.core
         seq, pc, mc = core.sample()
         plant = core.plant
-        s = plant.state
-        truth = Truth(s.theta, s.theta_dot, s.wheel_angle, s.wheel_rate, plant.u_held, s.torque,
-                      s.friction, plant.disturbance, bool(s.stuck), bool(core.timed_out), core.held_seq)
+        th, thd, thr, thrd, torque, friction, stuck = plant.state_values()
+        truth = Truth(th, thd, thr, thrd, plant.u_held, torque, friction, plant.disturbance, bool(stuck),
+                      bool(core.timed_out), core.held_seq)
         return Reading(seq, pc, mc, self._u_prev, truth)
 
     def write(self, seq: int, u: float) -> tuple[bool, str]:

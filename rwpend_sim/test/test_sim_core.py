@@ -380,3 +380,40 @@ def test_identical_inputs_give_bit_identical_runs():
     # and a different session differs
     _, out_c = drive(8)
     assert out_c != out_a
+
+
+def test_read_gives_the_plants_state_in_plain_frozen_dataclasses():
+    """SimHardware.read (every sample) reads the plant through Plant.state_values and makes
+    Truth and Reading with their own __init__ (the fields stored directly): the same fields,
+    bit for bit, as Plant.state, the same dataclasses -- equality, repr, replace(), frozen."""
+    from rwpend_model.plant import PlantState
+    from rwpend_sim.sim_core import Reading, SimHardware, Truth
+    core = make(theta=0.4, wheel_rate=30.0)
+    hw = SimHardware(core)
+    for k in range(400):
+        hw.write(k, 4.0 if k < 150 else (-0.3 if k < 300 else 0.0))
+        if k == 200:
+            core.torque(2.0, 0.05)
+        hw.advance()
+        r = hw.read()
+        plant = core.plant
+        th, thd, thr, thrd = plant._x
+        state = PlantState(theta=th, theta_dot=thd, wheel_angle=thr, wheel_rate=thrd,
+                           torque=plant._torque_available(plant._tau, thrd - thd),
+                           friction=plant._friction, stuck=plant._stuck)
+        assert plant.state == state and plant.state_values() == dataclasses.astuple(state)
+        want = dict(theta=th, theta_dot=thd, wheel_angle=thr, wheel_rate=thrd, u_applied=plant.u_held,
+                    torque=state.torque, friction=state.friction, disturbance=plant.disturbance,
+                    stuck=bool(state.stuck), timed_out=bool(core.timed_out), command_seq=core.held_seq)
+        assert [(f.name, repr(getattr(r.truth, f.name))) for f in dataclasses.fields(Truth)] == \
+            [(n, repr(v)) for n, v in want.items()]
+        assert (r.seq, r.pendulum_counts, r.motor_counts) == (core.k, *plant.counts())
+    assert [f.name for f in dataclasses.fields(Reading)] == list(vars(r))
+    assert r == Reading(r.seq, r.pendulum_counts, r.motor_counts, r.u_prev, Truth(**vars(r.truth)))
+    assert dataclasses.replace(r, seq=7) == Reading(7, r.pendulum_counts, r.motor_counts, r.u_prev, r.truth)
+    assert Reading(1, 2, 3, 0.5).truth is None and repr(Reading(1, 2, 3, 0.5)).startswith('Reading(seq=1,')
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.seq = 3
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.truth.theta = 0.0
+    assert hash(r.truth) == hash(Truth(**vars(r.truth)))
