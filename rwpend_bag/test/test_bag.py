@@ -8,7 +8,8 @@ import shutil
 import numpy as np
 import pytest
 
-from rwpend_bag import analysis, cdr, cli, msgdefs, synth
+from rwpend_bag import analysis, cdr, cli, msgdefs
+from support import synth
 from rwpend_bag.info import bag_info
 from rwpend_bag.reader import read_bag
 from rwpend_bag.seqtrack import SeqTracker

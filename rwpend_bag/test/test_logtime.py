@@ -12,7 +12,8 @@ import yaml
 from mcap.records import Channel, Header, Message, Metadata
 from mcap.stream_reader import StreamReader
 
-from rwpend_bag import logtime, msgdefs, sameness, synth
+from rwpend_bag import logtime, msgdefs, sameness
+from support import synth
 from rwpend_bag.logtime import (STAMP_CLOCK, STAMP_HEADER, STAMP_NONE, ArrivalOrder, LogTimeGuard,
                                 SimTimeOrder, leading_time_ns, stamp_kind)
 from rwpend_bag.writer import METADATA_KEY, METADATA_RECORD, BagWriter, ThreadedBagWriter, default_qos

@@ -9,7 +9,8 @@ import threading
 
 import pytest
 
-from rwpend_bag import sameness, synth
+from rwpend_bag import sameness
+from support import synth
 from rwpend_bag.logtime import SimTimeOrder
 from rwpend_bag.procwriter import DIED_WITHOUT_CLOSE, ProcessBagWriter, serve
 from rwpend_bag.reader import read_bag

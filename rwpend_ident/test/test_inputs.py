@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from rwpend_bag import synth
+from support import synth
 from rwpend_ident import cli
 from rwpend_ident.check import compare
 from rwpend_ident.identify import Identification, check_runs

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from . import msgdefs
+from rwpend_bag import msgdefs
 
 TYPES = {'/rwpend/encoders': 'rwpend_msgs/msg/EncoderCounts',
          '/rwpend/command': 'rwpend_msgs/msg/MotorCommand',
