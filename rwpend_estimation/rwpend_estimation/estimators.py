@@ -134,6 +134,14 @@ class Estimate:
     resyncs: int = 0        # re-synchronisations of the estimator so far (gaps.GapStats.resyncs)
     missed: int = 0         # samples without an estimate just before this one
 
+    def __init__(self, theta: float, theta_dot: float, wheel_angle: float, wheel_rate: float,
+                 friction: float, energy: float, resyncs: int = 0, missed: int = 0) -> None:
+        # the generated __init__ of a frozen dataclass sets each field through object.__setattr__
+        # (twice the time); one is made every sample
+        d = self.__dict__
+        d['theta'], d['theta_dot'], d['wheel_angle'], d['wheel_rate'] = theta, theta_dot, wheel_angle, wheel_rate
+        d['friction'], d['energy'], d['resyncs'], d['missed'] = friction, energy, resyncs, missed
+
 
 #: Bounds of the numeric settings of :class:`EstimatorConfig`: name -> (low, low inclusive,
 #: high); high is inclusive.
@@ -420,30 +428,33 @@ class Estimator:
         (refused) and DuplicateSampleError (ignored) change only the counters.
         """
         pc, mc, u, seq = self._checked(pendulum_counts, motor_counts, u, seq)
-        v = self._track.judge(seq, pc, mc)
-        if v.kind == REFUSE:
-            raise CountJumpError(f'{v.reason} (max_rate = {self.config.max_rate:g} rad/s)')
-        if v.kind == DUPLICATE:
-            raise DuplicateSampleError(v.reason)
-        if v.absolute:
+        kind, dp, dm, gap, missed, absolute, reason = self._track.judge(seq, pc, mc)
+        if kind == REFUSE:
+            raise CountJumpError(f'{reason} (max_rate = {self.config.max_rate:g} rad/s)')
+        if kind == DUPLICATE:
+            raise DuplicateSampleError(reason)
+        if absolute:
             self._origin_at(pc, mc)
         else:
-            self._np += v.dp
-            self._nm += v.dm
+            self._np += dp
+            self._nm += dm
         dl = self._delta
         y = self._theta0 + self._np * dl
         yr = self._wheel0 + (self._np + self._nm) * dl
-        if v.kind in (FIRST, RESYNC):
+        if kind == FIRST or kind == RESYNC:
             self._restart(y, yr)
         elif self._rates_unknown:
-            self._rates_from_difference(y, yr, v.gap)
+            self._rates_from_difference(y, yr, gap)
         else:
-            u = self._bridge(y, yr, u, v.gap)
+            if gap > 1:
+                u = self._bridge(y, yr, u, gap)
+            elif self.config.command_timeout_samples < 1:
+                u = 0.0                  # as _bridge: the plant held the command for 0 samples
             self._wd, self._wrd, self._f = self._update(y, yr, u)
             self._y, self._yr = y, yr
         est = Estimate(y, self._wd, yr, self._wrd, self._f,
                        1.0 - math.cos(y) + 0.5 * self._wd * self._wd / self._a,
-                       self._track.stats.resyncs, v.missed)
+                       self._track.stats.resyncs, missed)
         self.last = est
         return est
 
@@ -492,6 +503,9 @@ class Estimator:
     # ------------------------------------------------------------------ samples
     @staticmethod
     def _checked(pc, mc, u, seq) -> tuple[int, int, float, int | None]:
+        if (type(pc) is int and type(mc) is int and type(u) is float and math.isfinite(u)
+                and (seq is None or type(seq) is int and seq >= 0)):
+            return pc, mc, u, seq       # the loop's own types: what the conversions below return
         for nm, v in (('pendulum_counts', pc), ('motor_counts', mc)):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
                 raise ValueError(f'{nm} must be an integer, got {v!r}')

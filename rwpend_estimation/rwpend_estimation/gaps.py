@@ -147,12 +147,19 @@ class GapTracker:
             return self._resync(sample, Verdict(RESYNC, absolute=True, reason=(
                 f'plant restarted: seq {seq} after {rseq}')))
         gap = 1 if seq is None or rseq is None else seq - rseq
-        dp, dm = count_step(pc, ref[1]), count_step(mc, ref[2])
-        if self._plausible(dp, dm, gap):
+        # count_step and _plausible written out: this is every sample's path
+        dp = ((pc - ref[1] + _TWO31) % _TWO32) - _TWO31
+        dm = ((mc - ref[2] + _TWO31) % _TWO32) - _TWO31
+        limit = gap * self.max_step
+        if -limit <= dp <= limit and -limit <= dm <= limit:
             missed = gap - 1
             if missed > self.max_bridge:
                 return self._resync(sample, Verdict(RESYNC, dp, dm, gap, missed, reason=(
                     f'gap of {missed} samples > max_bridge = {self.max_bridge}')))
+            if not missed and not self._refused:      # the next sample: _take written out
+                self._ref = sample
+                self.stats.taken += 1
+                return Verdict(TAKE, dp, dm)
             self.stats.bridged += missed
             return self._take(sample, Verdict(TAKE, dp, dm, gap, missed))
         return self._implausible(sample, dp, dm, gap)

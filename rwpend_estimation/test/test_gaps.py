@@ -338,3 +338,153 @@ def test_every_estimator_survives_a_gap_and_a_restart(name):
     for k in range(1, 50):
         e = est.step(k, 2 * k, 0.0, k)
     assert e.theta_dot == pytest.approx(DELTA / H, abs=0.2)
+
+
+# ---------------------------------------------------------------- fast paths
+def plain_judge(tr, seq, pc, mc):
+    """GapTracker.judge composed of its helpers (count_step, _plausible, _take) as the module
+    doc states it: the reference of the written-out path judge takes for most samples."""
+    from rwpend_estimation.gaps import FIRST, RESYNC, TAKE, DUPLICATE, Verdict
+    sample = (seq, pc, mc)
+    tr._newest = sample
+    ref = tr._ref
+    if ref is None:
+        return tr._take(sample, Verdict(FIRST, absolute=True))
+    rseq = ref[0]
+    if seq is not None and rseq is not None and seq <= rseq:
+        if seq == rseq and pc == ref[1] and mc == ref[2]:
+            tr.stats.duplicates += 1
+            return Verdict(DUPLICATE, reason=f'seq {seq} again (same counts): ignored')
+        return tr._resync(sample, Verdict(RESYNC, absolute=True, reason=f'plant restarted: seq {seq} after {rseq}'))
+    gap = 1 if seq is None or rseq is None else seq - rseq
+    dp, dm = count_step(pc, ref[1]), count_step(mc, ref[2])
+    if tr._plausible(dp, dm, gap):
+        missed = gap - 1
+        if missed > tr.max_bridge:
+            return tr._resync(sample, Verdict(RESYNC, dp, dm, gap, missed, reason=(
+                f'gap of {missed} samples > max_bridge = {tr.max_bridge}')))
+        tr.stats.bridged += missed
+        return tr._take(sample, Verdict(TAKE, dp, dm, gap, missed))
+    return tr._implausible(sample, dp, dm, gap)
+
+
+@pytest.mark.parametrize('seed', [1, 2, 3])
+def test_judge_is_its_plain_composition(seed):
+    """judge's written-out path (count_step, _plausible and _take inlined for the next sample)
+    gives the verdicts, the reference and the counters of the plain composition, for a
+    stream with gaps, glitches, wraps of the int32 counters, repeats, restarts and no seq."""
+    rnd = random.Random(seed)
+    fast, plain = GapTracker(MAX_STEP, 20), GapTracker(MAX_STEP, 20)
+    seq, pc, mc = 0, 2 ** 31 - 3000, -5
+    kinds = set()
+    for k in range(20000):
+        r = rnd.random()
+        if r > 0.005:                   # else the same sample again
+            step = rnd.choice([1, 1, 1, 1, 2, 3, 25]) if r > 0.02 else rnd.choice([0, -3])
+            seq = max(0, seq + step)
+            pc = i32(pc + rnd.randint(-900, 900) + (rnd.choice([0, 50000]) if r < 0.04 else 0))
+            mc = i32(mc + rnd.randint(-1200, 1200))
+        s = None if 0.5 < r < 0.51 else seq
+        v = fast.judge(s, pc, mc)
+        assert v == plain_judge(plain, s, pc, mc)
+        assert (fast.reference, fast.newest, fast._refused, vars(fast.stats)) == \
+            (plain.reference, plain.newest, plain._refused, vars(plain.stats))
+        kinds.add(v.kind)
+    assert kinds == {'first', 'take', 'resync', 'refuse', 'duplicate'}
+
+
+def plain_step(est, pc, mc, u, seq):
+    """Estimator.step as the module doc composes it -- the conversions of _checked, the
+    verdict's fields by name, _bridge for every gap: the reference of its fast paths."""
+    from rwpend_estimation.estimators import Estimate
+    from rwpend_estimation.gaps import DUPLICATE, FIRST, REFUSE, RESYNC
+    pc, mc, u, seq = int(pc), int(mc), float(u), None if seq is None else int(seq)
+    v = est._track.judge(seq, pc, mc)
+    if v.kind == REFUSE:
+        raise CountJumpError(v.reason)
+    if v.kind == DUPLICATE:
+        raise DuplicateSampleError(v.reason)
+    if v.absolute:
+        est._origin_at(pc, mc)
+    else:
+        est._np += v.dp
+        est._nm += v.dm
+    y = est._theta0 + est._np * est._delta
+    yr = est._wheel0 + (est._np + est._nm) * est._delta
+    if v.kind in (FIRST, RESYNC):
+        est._restart(y, yr)
+    elif est._rates_unknown:
+        est._rates_from_difference(y, yr, v.gap)
+    else:
+        u = est._bridge(y, yr, u, v.gap)
+        est._wd, est._wrd, est._f = est._update(y, yr, u)
+        est._y, est._yr = y, yr
+    est.last = Estimate(y, est._wd, yr, est._wrd, est._f, 1.0 - math.cos(y) + 0.5 * est._wd * est._wd / est._a,
+                        est._track.stats.resyncs, v.missed)
+    return est.last
+
+
+@pytest.mark.parametrize('name', ESTIMATORS)
+@pytest.mark.parametrize('hold', [0, 3])
+def test_step_is_its_plain_composition_bit_for_bit(name, hold):
+    """Estimator.step (the loop's types taken as they are, the verdict unpacked, no _bridge
+    call without missing samples) gives the estimates of the plain composition bit for bit,
+    on a stream with drops, gaps, duplicates, swaps, glitches and restarts; command timeout
+    0 included (the command of the interval is then 0 even without a gap)."""
+    import numpy as np
+    from rwpend_estimation.estimators import Estimate
+    cfg = EstimatorConfig(estimator=name, command_timeout_samples=hold)
+    fast, plain = make_estimator(None, RIG, cfg), make_estimator(None, RIG, cfg)
+    for i, (seq, pc, mc, _, u, _) in enumerate(disturbed_stream(4000, 9)):
+        if i % 7 == 3:
+            pc, mc, u, seq = np.int64(pc), np.int32(mc), np.float64(u), np.uint64(seq)  # the slow path
+        got = want = None
+        try:
+            got = fast.step(pc, mc, u, seq)
+        except (CountJumpError, DuplicateSampleError) as exc:
+            got = type(exc)
+        try:
+            want = plain_step(plain, pc, mc, u, seq)
+        except (CountJumpError, DuplicateSampleError) as exc:
+            want = type(exc)
+        if isinstance(want, Estimate):
+            assert [f.hex() if isinstance(f, float) else f for f in vars(got).values()] == \
+                [f.hex() if isinstance(f, float) else f for f in vars(want).values()]
+            assert type(got.theta) is float and type(got.missed) is int
+        else:
+            assert got is want
+
+
+def test_checked_takes_the_loops_types_as_they_are_and_converts_or_refuses_the_rest():
+    """_checked: ints, a finite float and an int seq >= 0 (or None) come back as they are --
+    what int() and float() would return; anything else goes through the conversions or
+    is refused as before."""
+    import numpy as np
+    from rwpend_estimation.estimators import Estimator
+    args = (12, -7, 0.25, 3)
+    assert all(a is b for a, b in zip(Estimator._checked(*args), args))
+    assert Estimator._checked(1, 2, 0.5, None) == (1, 2, 0.5, None)
+    got = Estimator._checked(np.int64(1), np.int32(2), np.float32(0.5), np.uint64(4))
+    assert got == (1, 2, 0.5, 4) and [type(v) for v in got] == [int, int, float, int]
+    assert type(Estimator._checked(1, 2, 1, 4)[2]) is float
+    for bad in [(True, 2, 0.5, 1), (1, 2, math.inf, 1), (1, 2, math.nan, 1), (1, 2, 0.5, -1),
+                (1, 2, 0.5, True), (1.0, 2, 0.5, 1), (1, 2, '0.5', 1)]:
+        with pytest.raises(ValueError):
+            Estimator._checked(*bad)
+
+
+def test_estimate_is_the_plain_frozen_dataclass():
+    """Estimate stores its fields in its own __init__ (one is made every sample): the same
+    fields, defaults, equality, replace() and frozenness as the generated one."""
+    import dataclasses
+    from rwpend_estimation.estimators import Estimate
+    e = Estimate(3.0, 0.5, 10.0, 20.0, 0.7, 1.9)
+    assert [f.name for f in dataclasses.fields(Estimate)] == list(vars(e))
+    assert (e.resyncs, e.missed) == (0, 0)
+    assert e == Estimate(theta=3.0, theta_dot=0.5, wheel_angle=10.0, wheel_rate=20.0, friction=0.7,
+                         energy=1.9, resyncs=0, missed=0)
+    assert dataclasses.replace(e, missed=2) == Estimate(3.0, 0.5, 10.0, 20.0, 0.7, 1.9, 0, 2)
+    assert hash(e) == hash(Estimate(3.0, 0.5, 10.0, 20.0, 0.7, 1.9))
+    assert repr(e).startswith('Estimate(theta=3.0, theta_dot=0.5')
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        e.theta = 1.0
