@@ -8,7 +8,7 @@ import pytest
 
 from rwpend_model.plant import Plant
 from rwpend_model.rig import load_rig
-from rwpend_control.closed_loop import CountsState, simulate
+from support.closed_loop import CountsState, simulate
 from rwpend_control.safety import BRAKE_DONE_SPEED, StateWatchdog, brake, motor_speed
 from rwpend_control.supervisor import Controller, ControllerConfig
 

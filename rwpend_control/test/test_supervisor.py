@@ -6,7 +6,7 @@ import pytest
 from rwpend_model.plant import Plant
 from rwpend_model.rig import load_rig
 from rwpend_control import design
-from rwpend_control.closed_loop import balanced_since, simulate
+from support.closed_loop import balanced_since, simulate
 from rwpend_control.supervisor import Controller, ControllerConfig, gains_from_design
 
 rig = load_rig()

@@ -1,8 +1,9 @@
 """Closed-loop simulation of a :class:`Controller` on the :class:`rwpend_model.plant.Plant` (pure).
 
-For tests and offline studies: one ``Plant.step`` per sample with the command computed from
-either the true plant state or a state built from the quantized encoder counts with the
-filtered difference of Section 3.3, ``y_f(t) = T/(T+h) y_f(t-h) + (y(t) - y(t-h))/(T+h)``.
+Test support for the controller's unit tests (the stack's loop is rwpend_loop.loop; this one
+feeds the controller alone, without the estimator's code): one ``Plant.step`` per sample with the
+command computed from either the true plant state or a state built from the quantized encoder
+counts with the filtered difference of Section 3.3, ``y_f(t) = T/(T+h) y_f(t-h) + (y(t) - y(t-h))/(T+h)``.
 """
 from __future__ import annotations
 
