@@ -970,7 +970,41 @@ def _parser() -> argparse.ArgumentParser:
                    help='./rwpend up --cpu-latency of the runs (PM QoS CPU wake-up latency; '
                    'default 0: idle CPUs poll while a run lasts; none = no request)')
     p.add_argument('--json', action='store_true', help='print the JSON instead of the summary')
+    p.add_argument('--performance', metavar='DOC.md', default=None,
+                   help="write the results' tables into DOC.md between its two marker lines "
+                   '(rwpend_bench.table; e.g. PERFORMANCE.md)')
+    p.add_argument('--tables-from', metavar='BENCH.json', default=None,
+                   help='run nothing: print the tables of a saved bench.json (and write them with '
+                   '--performance)')
     return p
+
+
+def write_tables(res: dict, doc: str | None) -> str:
+    """The Markdown tables of ``res``, written into ``doc``'s marked region when given;
+    ValueError (nothing written) when the document cannot take them."""
+    from .table import markdown_tables, replace_region
+    tables = markdown_tables(res)
+    if doc:
+        path = Path(doc)
+        try:
+            text = path.read_text(encoding='utf-8')
+        except OSError as exc:
+            raise ValueError(f'{doc}: {exc.strerror or exc}') from exc
+        path.write_text(replace_region(text, tables), encoding='utf-8')
+    return tables
+
+
+def _tables_from(a) -> int:
+    """``--tables-from BENCH.json``: the tables of a saved result (written with --performance)."""
+    try:
+        res = json.loads(Path(a.tables_from).read_text(encoding='utf-8'))
+        print(write_tables(res, a.performance))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        print(f'rwpend bench: error: {a.tables_from}: {type(exc).__name__}: {exc}', file=sys.stderr)
+        return 2
+    if a.performance:
+        print(f'written: the tables of {a.performance}')
+    return 0
 
 
 @dataclass
@@ -1070,7 +1104,16 @@ def main(argv=None) -> int:
     p = _parser()
     argv = sys.argv[1:] if argv is None else list(argv)
     a = p.parse_args(argv)
+    if a.tables_from:
+        return _tables_from(a)
     from rwpend_bringup.cli import ROOT
+    if a.performance:
+        try:      # refuse a document without the markers before the runs, not after
+            from .table import replace_region
+            replace_region(Path(a.performance).read_text(encoding='utf-8'), '')
+        except (OSError, ValueError) as exc:
+            print(f'rwpend bench: error: --performance {a.performance}: {exc}', file=sys.stderr)
+            return 2
     try:
         st = settings(a)
     except ValueError as exc:
@@ -1105,4 +1148,7 @@ def main(argv=None) -> int:
     else:
         print(summary_text(res))
         print(f'written: {out / "bench.json"}')
+    if a.performance and not res.get('interrupted'):
+        write_tables(res, a.performance)
+        print(f'written: the tables of {a.performance}')
     return 130 if res.get('interrupted') else 0
