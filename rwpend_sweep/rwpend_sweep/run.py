@@ -154,22 +154,23 @@ def simulate(setup: RunSetup, trace: bool = False):
     th, thd, wr, us, sat = [], [], [], [], []
     seqs, pcs, mcs = [], [], []
     k = 0
-    step = loop.step
+    step, finish = loop.step, loop.finish_interval    # finish: integrates the interval if pending
     plant = core.plant
+    end = duration - 1e-9
+    th_, thd_, wr_, us_, sat_ = th.append, thd.append, wr.append, us.append, sat.append
     while True:
-        if loop.interval_pending:
-            loop.finish_interval(late=False)
-        if plant.t >= duration - 1e-9:        # the simulator's done()
+        finish()
+        if plant.t >= end:                    # the simulator's done()
             break
         tick = step(t=k * period_ns * 1e-9)
         tr = tick.reading.truth
-        th.append(tr.theta)
-        thd.append(tr.theta_dot)
-        wr.append(tr.wheel_rate)
+        th_(tr.theta)
+        thd_(tr.theta_dot)
+        wr_(tr.wheel_rate)
         u = tick.u
-        us.append(u if u is not None else 0.0)
+        us_(u if u is not None else 0.0)
         st = tick.status
-        sat.append(st is not None and st.saturated)
+        sat_(st is not None and st.saturated)
         if trace:
             r = tick.reading
             seqs.append(r.seq)
