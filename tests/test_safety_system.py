@@ -39,6 +39,7 @@ from test_stack_system import answers
 from rwpend_bag.reader import read_bag
 from rwpend_bringup.launch import NodeSpec, overrides_yaml
 from rwpend_ros.health import EXIT_LOOP_DEAD
+from rwpend_ros.testenv import test_domain_id
 
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
@@ -595,6 +596,11 @@ FUZZER = textwrap.dedent('''
     tail = {'sent': n_tail, 'commands': seen['commands'] - before[0], 'states': seen['states'] - before[1],
             'estimator_samples': est_samples() - before[2]}
     print(f'clean tail: {tail}', flush=True)
+    if n_msgs and n_srv:
+        # both parts in one run: the nodes' counters as the messages left them (one more round of
+        # /diagnostics), before the services below reset or re-set anything
+        spin(2.5)
+    diags_msgs = json.loads(json.dumps(diags))
     # ------------------------------------------------ services
     def pvalue():
         pv = ParameterValue()
@@ -682,7 +688,8 @@ FUZZER = textwrap.dedent('''
         rclpy.spin_once(node, timeout_sec=0.01)
     alive = fut.done() and fut.result().success
     spin(2.5)   # one more round of /diagnostics
-    json.dump({'sent': sent, 'seen': seen, 'tail': tail, 'services': srv, 'diags': diags, 'alive': alive,
+    json.dump({'sent': sent, 'seen': seen, 'tail': tail, 'services': srv, 'diags': diags,
+               'diags_msgs': diags_msgs if n_srv else diags, 'alive': alive,
                't_msgs': t_msgs, 't_services': time.monotonic() - t1}, open(out, 'w'))
     print('fuzz done', flush=True)
 ''')
@@ -704,7 +711,7 @@ def run_fuzz(tmp_path, env, n_msgs, n_srv):
         script = tmp_path / 'fuzzer.py'
         script.write_text(FUZZER)
         P.start('fuzzer', [PY, '-u', str(script), str(out), str(n_msgs), str(n_srv), '5'])
-        P.procs['fuzzer'].wait(timeout=170)
+        P.procs['fuzzer'].wait(timeout=300)
         wall = time.monotonic() - t0
         assert P.procs['fuzzer'].returncode == 0, P.log('fuzzer')[-3000:]
         for tag in ('controller', 'estimator', 'sim'):
@@ -720,18 +727,34 @@ def run_fuzz(tmp_path, env, n_msgs, n_srv):
     r['ctl'] = d['/fz_c/controller'][1]
     r['est'] = d['/fz_e/estimator'][1]
     r['sim'] = next(v for k, v in d.items() if k.startswith('/fz_s/sim'))[1]
+    dm = r['diags_msgs']
+    r['msgs'] = {'ctl': dm['/fz_c/controller'][1], 'est': dm['/fz_e/estimator'][1],
+                 'sim': next(v for k, v in dm.items() if k.startswith('/fz_s/sim'))[1]}
     r['wall'] = round(wall, 1)
     return r
 
 
-@pytest.mark.timeout(180)
-def test_fuzz_every_subscriber(tmp_path, ros_env):
+@pytest.fixture(scope='module')
+def fuzzed(tmp_path_factory):
+    """One fuzz of the three nodes for both fuzz tests: the messages (then a clean tail, the
+    nodes' counters taken), then the services -- one start of the nodes, not two (the tests only
+    read what the run left); (messages, requests per service, the run's figures)."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(test_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               PYTHONUNBUFFERED='1')
+    env['RMW_IMPLEMENTATION'] = env.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    n = int(os.environ.get('RWPEND_FUZZ_MESSAGES', '10000'))
+    n_srv = int(os.environ.get('RWPEND_FUZZ_REQUESTS', '10000'))
+    return n, n_srv, run_fuzz(tmp_path_factory.mktemp('fuzz'), env, n, n_srv)
+
+
+@pytest.mark.timeout(360)       # the shared fuzz run (both parts) is set up in this test
+def test_fuzz_every_subscriber(fuzzed):
     """>= 10 000 random messages into controller ``state``, estimator ``encoders`` and
     ``command``, simulator ``command``: nothing dies, refusals counted, every command published
-    by the controller finite with |u| <= 10, every estimate and plant state finite."""
-    n = int(os.environ.get('RWPEND_FUZZ_MESSAGES', '10000'))
-    r = run_fuzz(tmp_path, ros_env, n, 0)
-    seen, ctl, est, sim = r['seen'], r['ctl'], r['est'], r['sim']
+    by the controller finite with |u| <= 10, every estimate and plant state finite (the nodes'
+    counters as the messages left them, before the services of the same run)."""
+    n, _, r = fuzzed
+    seen, (ctl, est, sim) = r['seen'], (r['msgs'][k] for k in ('ctl', 'est', 'sim'))
     # what the order gates stopped (rwpend_ros.order: duplicates, older messages, too short)
     gate = {name: gate_dropped(d[key]) for name, d, key in (
         ('ctl', ctl, 'state_order'), ('est', est, 'encoders_order'), ('est_cmd', est, 'command_order'),
@@ -785,12 +808,12 @@ def gate_dropped(summary: str) -> int:
     return sum(int(counts.get(k, 0)) for k in ('duplicates', 'stale', 'malformed'))
 
 
-@pytest.mark.timeout(180)
-def test_fuzz_every_service(tmp_path, ros_env):
+@pytest.mark.timeout(360)       # the shared fuzz run, when this test runs alone
+def test_fuzz_every_service(fuzzed):
     """Random requests to set_mode, set_parameters (controller, estimator, simulator), reset,
-    disturb and estop, all at once: every request answered, malformed ones refused, nothing dies."""
-    n = int(os.environ.get('RWPEND_FUZZ_REQUESTS', '10000'))
-    r = run_fuzz(tmp_path, ros_env, 0, n)
+    disturb and estop, all at once: every request answered, malformed ones refused, nothing dies
+    (after the fuzzed messages of the same run: the nodes have taken those too)."""
+    _, n, r = fuzzed
     m = {'requests_per_service': n, 'services': r['services'], 'wall_s': r['wall'],
          'services_s': round(r['t_services'], 1), 'controller_param_errors': int(r['ctl']['param_errors'])}
     print('measured:', json.dumps(m))
