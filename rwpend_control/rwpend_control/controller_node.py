@@ -71,6 +71,7 @@ from rwpend_ros.simtime import sample_time
 from rwpend_control.parameters import (DESIGN_DEFAULTS, DESIGN_GROUPS, DESIGNED, MODES, PARAM_FIELDS,
                                        controller_specs, design_group)
 from rwpend_control.user_law import LawError, load_law
+from rwpend_control.status_codes import FAULT_NONE, FAULT_STALE_STATE, SAFETY_SWITCHES
 from rwpend_control.supervisor import STALE_FAULT, Controller, ControllerConfig, Status, gains_from_design
 #: Period of the stale-state check (s, steady clock): the controller notices a silent state
 #: stream within state_timeout_samples h + this.  The plant's own command timeout zeros the
@@ -129,7 +130,7 @@ class ControllerNode(RwNode):
         self.law_errors = 0          # exceptions inside the control laws (u = 0)
         self.param_errors = 0        # exceptions while validating parameters (refused)
         self.stale_fault = ''        # the fault while the state is stale
-        self._last_fault_kind = ''
+        self._last_fault_code = FAULT_NONE
         self._since_status = 0
         self._syncing = False
         self._pending_params: list[Parameter] = []
@@ -343,9 +344,7 @@ class ControllerNode(RwNode):
                                      resyncs=resyncs)
         except Exception as exc:  # noqa: BLE001 - a fault in a law: zero torque, reported
             self.law_errors += 1
-            u, st = 0.0, Status(t=t, seq=seq, mode=self.ctrl.mode, law=self.ctrl.law,
-                                last_switch=self.ctrl.last_switch, switch_count=self.ctrl.switch_count,
-                                reason=self.ctrl.reason, fault=f'internal error: {type(exc).__name__}: {exc}')
+            u, st = 0.0, self.ctrl.internal_error(t, seq, exc)
         if not math.isfinite(u) or abs(u) > self.ctrl.u_max:   # pragma: no cover - saturated above
             u = 0.0
         self.publish_result(header, seq, u, st, sec, nanosec)
@@ -370,18 +369,17 @@ class ControllerNode(RwNode):
         self.diag_timer.sample_done()
         self._since_status += 1
         self.last_status = st
-        fault_kind = st.fault.split(':', 1)[0]
-        if st.event is not None or st.note or fault_kind != self._last_fault_kind \
+        if st.event is not None or st.note or st.fault_code != self._last_fault_code \
                 or self._since_status >= self.status_every:
             self._since_status = 0
-            self._last_fault_kind = fault_kind
+            self._last_fault_code = st.fault_code
             self.publish_status(st, sec, nanosec)
             if st.note:
                 self.publish_diagnostics()
         if st.event is not None:
             ev = st.event
             # one call site per severity: rclpy refuses a severity change at a call site
-            if ev.reason.startswith(('overspeed', 'saturated', 'fell')):
+            if ev.code in SAFETY_SWITCHES:
                 self.get_logger().warn(f'safety switch {ev.from_} -> {ev.to}: {ev.reason}')
             elif ev.from_ == ev.to:      # a fresh start of the same law: every stale episode
                 self.get_logger().info(f'switch {ev.from_} -> {ev.to}: {ev.reason}',
@@ -411,7 +409,7 @@ class ControllerNode(RwNode):
         self.pub_cmd.publish(c)
         self.stale_fault = st.fault
         self.last_status = st
-        self._last_fault_kind = st.fault.split(':', 1)[0]
+        self._last_fault_code = FAULT_STALE_STATE
         self._since_status = 0
         self.publish_status(st, stamp.sec, stamp.nanosec)
         self.publish_diagnostics()
@@ -423,7 +421,8 @@ class ControllerNode(RwNode):
         t = _time_msg(st.last_switch)
         self.pub_status.publish(wire.pack_controller_status(
             wire.pack_header(sec, nanosec, ''), st.seq, st.mode, st.law, st.u, st.u_unsaturated,
-            st.friction_compensation, st.saturated, (t.sec, t.nanosec), st.switch_count, st.reason, st.fault))
+            st.friction_compensation, st.saturated, (t.sec, t.nanosec), st.switch_count, st.switch_code, st.reason,
+            st.fault_code, st.fault))
 
     def on_estop_state(self, msg: Bool) -> None:
         """The plant's e-stop: raised -> off at once; cleared -> still off until a mode is set."""
@@ -433,7 +432,8 @@ class ControllerNode(RwNode):
             self._schedule_sync([Parameter('mode', value=self.ctrl.mode)])
             self.publish_status(Status(t=self.ctrl.t, seq=self.ctrl.watchdog.last_seq or 0, mode=self.ctrl.mode,
                                        law=self.ctrl.law, last_switch=self.ctrl.last_switch,
-                                       switch_count=self.ctrl.switch_count, reason=self.ctrl.reason),
+                                       switch_count=self.ctrl.switch_count, reason=self.ctrl.reason,
+                                       switch_code=self.ctrl.switch_code),
                                 *divmod(self.get_clock().now().nanoseconds, 1_000_000_000))
 
     def on_set_mode(self, req: SetMode.Request, resp: SetMode.Response) -> SetMode.Response:
@@ -455,7 +455,7 @@ class ControllerNode(RwNode):
             level, message = DiagnosticStatus.ERROR, self.stale_fault or f'{STALE_FAULT}: u = 0'
         elif st.fault:
             level, message = DiagnosticStatus.ERROR, st.fault
-        elif ctrl.law == 'brake' or ctrl.reason.startswith(('overspeed', 'saturated', 'fell')):
+        elif ctrl.law == 'brake' or ctrl.switch_code in SAFETY_SWITCHES:
             level, message = DiagnosticStatus.WARN, f'{ctrl.mode}/{ctrl.law}: {ctrl.reason}'
         elif ctrl.bad_state_count or wd.out_of_order or wd.episodes:
             level, message = DiagnosticStatus.WARN, (

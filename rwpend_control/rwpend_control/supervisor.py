@@ -25,7 +25,9 @@ The default theta_0 = 0.8 rad gives 0.3 rad of hysteresis; a falling pendulum re
 0.1 s after leaving theta_s, before the swing-up has lost anything.
 
 Every change of mode or law, and every fresh start of one, is a :class:`SwitchEvent`
-(t, from, to, reason).
+(t, from, to, reason, code). What a status says for people (``reason``, ``fault``) it says for
+programs as a code (``switch_code``: SWITCH_*, ``fault_code``: FAULT_*, the constants of
+ControllerStatus, :mod:`rwpend_control.status_codes`), set together.
 
 Fresh start (issue 21: gaps are survived).  A state estimate with a new re-synchronisation of
 the estimator (``StateEstimate.resyncs`` changed: its state was re-initialised from the counts
@@ -52,22 +54,22 @@ Safety (:mod:`rwpend_control.safety`; every transition is a SwitchEvent or a ``f
 shows in ControllerStatus and /diagnostics):
 
 * stale state: no new state for ``state_timeout_samples`` h on the controller's clock -> u = 0
-  once (answering seq + 1) and ``fault`` "stale state: ..." (:meth:`Controller.check_stale`,
+  once (answering seq + 1) and ``fault`` "stale state: ..." (FAULT_STALE_STATE; :meth:`Controller.check_stale`,
   called by the node's timer); the first fresh state clears it and starts the mode afresh
   (Fresh start, above).
-  States with a seq that does not increase are refused (not answered, counted).
+  States with a seq that does not increase are refused (not answered, counted; FAULT_OUT_OF_ORDER).
 * bad state (non-finite or implausible fields): refused, counted, u = 0 for that sample (it
-  does not count as a fresh state for the watchdog).
+  does not count as a fresh state for the watchdog; FAULT_BAD_STATE).
 * wheel faster than ``wheel_speed_limit`` (motor speed, below the cut-off of (2.13)) in any
-  mode but ``off`` -> mode ``off``, law ``brake`` (or ``off``), reason "overspeed: ...";
+  mode but ``off`` -> mode ``off``, law ``brake`` (or ``off``), reason "overspeed: ..." (SWITCH_OVERSPEED);
   in ``auto`` the mode stays ``auto``: law ``brake`` (or ``off``: u = 0, the wheel coasts)
   until |w| < BRAKE_DONE_SPEED, then a fresh law from the state (swing-up, or catch if
-  inside theta_s), reason "wheel stopped: ...".  ``auto`` never ends by itself: a fall swings
+  inside theta_s), reason "wheel stopped: ..." (SWITCH_WHEEL_STOPPED).  ``auto`` never ends by itself: a fall swings
   up again, an overspeed brakes and swings up again, a gap starts it afresh.
 * ``balance`` saturated for longer than ``max_saturation_time`` -> ``saturation_action``
-  (off, swingup or auto), reason "saturated: ...".
+  (off, swingup or auto), reason "saturated: ..." (SWITCH_SATURATED).
 * ``balance`` with the pendulum beyond theta_0 (out of the region where it can be caught)
-  -> ``off``, reason "fell: ..." (``auto`` swings up again instead).
+  -> ``off``, reason "fell: ..." (SWITCH_FELL; ``auto`` swings up again instead, SWITCH_FALL).
 """
 from __future__ import annotations
 
@@ -84,12 +86,15 @@ from .parameters import (BY_NAME, CONFIG_PARAMS, DESIGN_DEFAULTS, DESIGN_GROUPS,
                          PARAM_FIELDS, lumped_lag, range_refusal, type_refusal)
 from .user_law import LawError, LawState
 from .safety import BRAKE_DONE_SPEED, StateWatchdog, brake, motor_speed
+from .status_codes import (FAULT_BAD_STATE, FAULT_INTERNAL, FAULT_LAW, FAULT_NONE, FAULT_OUT_OF_ORDER,
+                           FAULT_STALE_STATE, SWITCH_CATCH, SWITCH_ESTOP_CLEARED, SWITCH_ESTOP_RAISED,
+                           SWITCH_FALL, SWITCH_FELL, SWITCH_FRESH_START, SWITCH_LAW_FAULT, SWITCH_OVERSPEED,
+                           SWITCH_SATURATED, SWITCH_SET_MODE, SWITCH_START, SWITCH_WHEEL_BRAKED,
+                           SWITCH_WHEEL_STOPPED)
 
-#: how the fault of a sample the controller answered without a fresh state begins (readers of
-#: controller/status tell the loop's faults from a law's by it)
+#: how the text of a stale state's fault begins (for people: programs read FAULT_STALE_STATE)
 STALE_FAULT = 'stale state'
-#: how the fault of a sample whose state the controller refused as implausible begins (the
-#: loop's too: the estimator's output, not the law)
+#: how the text of a refused state's fault begins (for people: programs read FAULT_BAD_STATE)
 BAD_STATE_FAULT = 'bad state'
 
 #: s of silence of the state stream after which its return starts the mode afresh (module doc);
@@ -111,12 +116,14 @@ ESTOP_CLEARED = 'e-stop cleared: off (zero torque) until a mode is set'
 @dataclass(frozen=True)
 
 class SwitchEvent:
-    """A change of mode or law: at time t, from ``from_`` to ``to`` (``mode/law``), and why."""
+    """A change of mode or law: at time t, from ``from_`` to ``to`` (``mode/law``), and why
+    (``reason`` for people, ``code`` one of ControllerStatus's SWITCH_*)."""
 
     t: float
     from_: str
     to: str
     reason: str
+    code: int = SWITCH_START
 
 
 @dataclass
@@ -135,6 +142,8 @@ class Status:
     switch_count: int = 0
     reason: str = ''
     fault: str = ''
+    switch_code: int = SWITCH_START    # why the last switch happened (SWITCH_*), as reason says
+    fault_code: int = FAULT_NONE       # what forces u = 0 (FAULT_*), as fault says
     event: SwitchEvent | None = None   # set on the sample on which a switch happened
     answer: bool = True    # False: the state was refused (out of order), publish no command
     note: str = ''         # the state stream recovered / restarted on this sample
@@ -294,6 +303,7 @@ class Controller:
         self.last_switch = 0.0
         self.switch_count = 0
         self.reason = 'start'
+        self.switch_code = SWITCH_START
         #: the plant's e-stop is raised (:meth:`estop`): no mode but off until it is cleared
         self.estopped = False
         self.bad_state_count = 0
@@ -363,12 +373,14 @@ class Controller:
         return self.set_params({f'{group}.{k}': v for k, v in gains.items()})
 
     # ------------------------------------------------------------------ switching
-    def _switch(self, t: float, mode: str, law: str, reason: str) -> None:
-        ev = SwitchEvent(t, f'{self.mode}/{self.law}', f'{mode}/{law}', reason)
+    def _switch(self, t: float, mode: str, law: str, reason: str, code: int) -> None:
+        """Change to ``mode``/``law`` at ``t``, why: ``reason`` (text) and ``code`` (SWITCH_*)."""
+        ev = SwitchEvent(t, f'{self.mode}/{self.law}', f'{mode}/{law}', reason, code)
         self.mode, self.law = mode, law
         self.last_switch = t
         self.switch_count += 1
         self.reason = reason
+        self.switch_code = code
         self.events.append(ev)
         self._pending = ev
         self._sat_since = None
@@ -383,12 +395,12 @@ class Controller:
             if self.estopped:
                 return False
             self.estopped = True
-            self._switch(t, 'off', 'off', ESTOP_RAISED)
+            self._switch(t, 'off', 'off', ESTOP_RAISED, SWITCH_ESTOP_RAISED)
             return True
         if not self.estopped:
             return False
         self.estopped = False
-        self._switch(t, 'off', 'off', ESTOP_CLEARED)
+        self._switch(t, 'off', 'off', ESTOP_CLEARED, SWITCH_ESTOP_CLEARED)
         return True
 
     def set_mode(self, mode: str, t: float | None = None) -> tuple[bool, str]:
@@ -415,7 +427,7 @@ class Controller:
         if mode == 'wheel_velocity':
             self._wheel_pi.reset()
         law = {'auto': self._auto_law(x, None) if x is not None else 'swingup'}.get(mode, mode)
-        self._switch(t, mode, law, f'set_mode {mode}')
+        self._switch(t, mode, law, f'set_mode {mode}', SWITCH_SET_MODE)
         return True, f'mode {mode}'
 
     def _auto_law(self, x: float, theta_dot: float | None) -> str:
@@ -461,12 +473,12 @@ class Controller:
             if abs(x) > self.config.theta_0:
                 self.fall_trips += 1
                 self._switch(t, 'off', 'off', f'fell: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g} '
-                                              f'at a fresh start of balance ({why})')
+                                              f'at a fresh start of balance ({why})', SWITCH_FELL)
                 return
             self._capture_ref = True
         elif mode == 'wheel_velocity':
             self._wheel_pi.reset()
-        self._switch(t, mode, law, f'fresh start of {mode}: {why}')
+        self._switch(t, mode, law, f'fresh start of {mode}: {why}', SWITCH_FRESH_START)
 
     def pop_events(self) -> list[SwitchEvent]:
         out = list(self.events)
@@ -499,10 +511,10 @@ class Controller:
             law = self._auto_law(x, theta_dot)
             if law != self.law:
                 if law == 'catch':
-                    why = f'catch: |theta-pi|={abs(x):.3f}<{self.config.theta_s:g}'
+                    why, code = f'catch: |theta-pi|={abs(x):.3f}<{self.config.theta_s:g}', SWITCH_CATCH
                 else:
-                    why = f'fall: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g}'
-                self._switch(t, 'auto', law, why)
+                    why, code = f'fall: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g}', SWITCH_FALL
+                self._switch(t, 'auto', law, why, code)
             if law == 'catch':
                 return self._patch(theta, theta_dot, wheel_angle, wheel_rate)
             return self._swing(theta, theta_dot, wheel_rate)
@@ -510,7 +522,8 @@ class Controller:
             if abs(x) > self.config.theta_0:
                 # out of the region where balance can catch it (Section 6.4): off, reported
                 self.fall_trips += 1
-                self._switch(t, 'off', 'off', f'fell: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g}')
+                self._switch(t, 'off', 'off', f'fell: |theta-pi|={abs(x):.3f}>{self.config.theta_0:g}',
+                             SWITCH_FELL)
                 return 0.0
             if self._capture_ref:
                 self._capture_ref = False
@@ -527,7 +540,8 @@ class Controller:
         if self.law == 'brake':
             w = motor_speed(theta_dot, wheel_rate)
             if abs(w) < BRAKE_DONE_SPEED:
-                self._switch(t, 'off', 'off', f'wheel braked: |w| = {abs(w):.1f} < {BRAKE_DONE_SPEED:g} rad/s')
+                self._switch(t, 'off', 'off', f'wheel braked: |w| = {abs(w):.1f} < {BRAKE_DONE_SPEED:g} rad/s',
+                             SWITCH_WHEEL_BRAKED)
                 return 0.0
             return brake(self.config.wheel_kp, w, self.u_max)
         return 0.0
@@ -540,7 +554,7 @@ class Controller:
             return brake(self.config.wheel_kp, w, self.u_max) if self.law == 'brake' else 0.0
         law = self._start_law(x, theta_dot)
         self._switch(t, 'auto', law, f'wheel stopped: |w| = {abs(w):.1f} < {BRAKE_DONE_SPEED:g} rad/s: '
-                                     f'auto {law} again')
+                                     f'auto {law} again', SWITCH_WHEEL_STOPPED)
         if law == 'catch':
             return self._patch(theta, theta_dot, wheel_angle, wheel_rate)
         return self._swing(theta, theta_dot, wheel_rate)
@@ -555,7 +569,7 @@ class Controller:
             return self.user_law(state)
         except LawError as exc:
             self._law_fault = f'law fault: {exc}'
-            self._switch(t, 'off', 'off', self._law_fault)
+            self._switch(t, 'off', 'off', self._law_fault, SWITCH_LAW_FAULT)
             return 0.0
 
     def _check_wheel_speed(self, t: float, theta_dot: float, wheel_rate: float) -> None:
@@ -573,7 +587,7 @@ class Controller:
             then = (f', then auto again below {BRAKE_DONE_SPEED:g} rad/s' if mode == 'auto' else '')
             self._switch(t, mode, law, f'overspeed: |w| = {abs(w):.0f} > wheel_speed_limit = {limit:g} rad/s '
                                        f'in {self.mode}/{self.law}: '
-                                       + ('braking' if law == 'brake' else 'u = 0') + then)
+                                       + ('braking' if law == 'brake' else 'u = 0') + then, SWITCH_OVERSPEED)
 
     def _check_saturation(self, t: float, saturated: bool, x: float) -> bool:
         """``balance`` saturated for longer than max_saturation_time -> saturation_action;
@@ -592,9 +606,10 @@ class Controller:
         action = c.saturation_action
         why = f'saturated: |u| at {self.u_max:g} for {held:.3f} s > max_saturation_time = {c.max_saturation_time:g} s'
         if action == 'auto':
-            self._switch(t, 'auto', 'catch' if abs(x) <= c.theta_0 else 'swingup', why + ': auto')
+            self._switch(t, 'auto', 'catch' if abs(x) <= c.theta_0 else 'swingup', why + ': auto',
+                         SWITCH_SATURATED)
         else:
-            self._switch(t, action, action, why + f': {action}')
+            self._switch(t, action, action, why + f': {action}', SWITCH_SATURATED)
         return True
 
     def update(self, t: float, seq: int, theta: float, theta_dot: float, wheel_angle: float,
@@ -606,12 +621,12 @@ class Controller:
         now = t if now is None else now
         # a bad state is answered with u = 0 but is no fresh state for the watchdog
         fault = self._bad_state(theta, theta_dot, wheel_angle, wheel_rate, friction)
+        fault_code = FAULT_BAD_STATE if fault else FAULT_NONE
         note = ''
         if not fault:
             ok, note = self.watchdog.admit(seq, now, t)
             if not ok:
-                return 0.0, Status(t=self.t, seq=seq, mode=self.mode, law=self.law, last_switch=self.last_switch,
-                                   switch_count=self.switch_count, reason=self.reason, fault=note, answer=False)
+                return 0.0, self._status(self.t, seq, fault=note, fault_code=FAULT_OUT_OF_ORDER, answer=False)
         self.t = t
         u_law = 0.0
         fc = 0.0
@@ -636,12 +651,24 @@ class Controller:
         u = umax if u_uns > umax else (-umax if u_uns < -umax else u_uns)
         ev, self._pending = self._pending, None
         if self._law_fault:
-            fault, self._law_fault = self._law_fault, ''
+            fault, fault_code, self._law_fault = self._law_fault, FAULT_LAW, ''
+        # (built here, not by _status: the path of every sample)
         status = Status(t=t, seq=seq, mode=self.mode, law=self.law, u=u, u_unsaturated=u_uns,
                         friction_compensation=fc, saturated=abs(u_uns) > umax,
                         last_switch=self.last_switch, switch_count=self.switch_count,
-                        reason=self.reason, fault=fault, event=ev, note=note)
+                        reason=self.reason, fault=fault, switch_code=self.switch_code,
+                        fault_code=fault_code, event=ev, note=note)
         return u, status
+
+    def _status(self, t: float, seq: int, **kw: Any) -> Status:
+        """The status at ``t`` answering ``seq``: the mode, law and last switch now, and ``kw``."""
+        return Status(t=t, seq=seq, mode=self.mode, law=self.law, last_switch=self.last_switch,
+                      switch_count=self.switch_count, reason=self.reason, switch_code=self.switch_code, **kw)
+
+    def internal_error(self, t: float, seq: int, exc: BaseException) -> Status:
+        """The status of a sample on which ``update`` raised ``exc`` (u = 0, fault FAULT_INTERNAL)."""
+        return self._status(t, seq, fault=f'internal error: {type(exc).__name__}: {exc}',
+                            fault_code=FAULT_INTERNAL)
 
     def check_stale(self, now: float) -> Status | None:
         """From a periodic timer: when the state has just gone stale (no new state for
@@ -654,9 +681,7 @@ class Controller:
         n = self.config.state_timeout_samples
         fault = (f'{STALE_FAULT}: no new state for {wd.silence(now) * 1e3:.1f} ms (> {n} samples of '
                  f'{self.h * 1e3:g} ms) after seq {wd.last_seq}; u = 0')
-        return Status(t=now, seq=min(wd.last_seq + 1, MAX_SEQ), mode=self.mode, law=self.law, u=0.0,
-                      last_switch=self.last_switch, switch_count=self.switch_count, reason=self.reason,
-                      fault=fault)
+        return self._status(now, min(wd.last_seq + 1, MAX_SEQ), fault=fault, fault_code=FAULT_STALE_STATE)
 
     @property
     def stale(self) -> bool:

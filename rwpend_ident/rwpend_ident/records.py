@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rwpend_control.supervisor import BAD_STATE_FAULT, STALE_FAULT
+from rwpend_control.status_codes import LOOP_FAULTS
 from rwpend_model.plant import Plant
 
 from .checks import delivery_problem, Rest, direction_problem, rest_problem
@@ -45,7 +45,7 @@ def refused(name: str, d) -> None:
     state refused as implausible, e.g. the estimator's first samples after a hand moved the
     pendulum between two runs -- are reported by the loop and do not stop the identification
     (what they did to the data, the identification's own checks judge)."""
-    faults = [(t, f) for t, f in d.faults if not f.startswith((STALE_FAULT, BAD_STATE_FAULT))]
+    faults = [(t, f) for t, code, f in d.faults if code not in LOOP_FAULTS]
     if faults:
         t, fault = faults[0]
         reason = fault.split('NotReady: ', 1)[-1]

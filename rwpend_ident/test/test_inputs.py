@@ -17,6 +17,7 @@ from rwpend_ident.plan import plan
 from rwpend_ident.records import IdentError
 from rwpend_ident.rigfile import example_rig_file
 from rwpend_ident.session import load_bags
+from rwpend_control.status_codes import FAULT_BAD_STATE, FAULT_LAW, FAULT_STALE_STATE
 from rwpend_lab.data import RunData
 from rwpend_model.rig import default_rig_file, load_rig, load_rig_file
 
@@ -57,7 +58,8 @@ def test_missing_runs_are_named():
 def test_a_refused_step_stops_with_its_reason():
     z = np.zeros(10)
     d = RunData(h=0.001, t=z, pc=z, mc=z, u=z, theta=z, theta_dot=z, wheel_angle=z, wheel_rate=z, friction=z,
-                faults=[(1.5, 'procedures.py: NotReady: pendulum not at rest: it moved 0.02 rad (waited 3 s)')])
+                faults=[(1.5, FAULT_LAW, 'procedures.py: NotReady: pendulum not at rest: it moved 0.02 rad '
+                                    '(waited 3 s)')])
     with pytest.raises(IdentError, match=r'pulse\+3: the step was refused at t = 1.50 s: pendulum not at rest'):
         check_runs(BASE, {'pulse+3': d}, ['pulse+3'])
 
@@ -143,8 +145,10 @@ def test_only_a_laws_fault_is_a_refusal_the_loops_are_not():
     moved the pendulum) does not stop the identification; a law's fault does, with its reason."""
     from types import SimpleNamespace
     from rwpend_ident.records import IdentError, refused
-    refused('swing', SimpleNamespace(faults=[(0.0, 'bad state: |theta_dot| = 285.9 > 200 rad/s'),
-                                             (0.2, 'stale state: 3 ms old')]))
+    refused('swing', SimpleNamespace(faults=[(0.0, FAULT_BAD_STATE, 'bad state: |theta_dot| = 285.9 > 200 rad/s'),
+                                             (0.2, FAULT_STALE_STATE, 'stale state: 3 ms old'),
+                                             # judged by the code (fault_code), not by the text
+                                             (0.3, FAULT_STALE_STATE, 'law fault: NotReady: a text')]))
     with pytest.raises(IdentError, match=r'pulse\+: the step was refused at t = 0.50 s: rotor moving'):
-        refused('pulse+', SimpleNamespace(faults=[(0.1, 'bad state: |theta_dot| = 250 > 200 rad/s'),
-                                                  (0.5, 'law fault: NotReady: rotor moving')]))
+        refused('pulse+', SimpleNamespace(faults=[(0.1, FAULT_BAD_STATE, 'bad state: |theta_dot| = 250 > 200 rad/s'),
+                                                  (0.5, FAULT_LAW, 'law fault: NotReady: rotor moving')]))

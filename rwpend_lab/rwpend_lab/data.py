@@ -41,7 +41,9 @@ class RunData:
     friction: np.ndarray
     truth: dict = field(default_factory=dict)        # true_theta, ..., torque, disturbance (sim)
     switches: list = field(default_factory=list)     # (t, mode, law, reason) from controller/status
-    faults: list = field(default_factory=list)       # (t, fault) from controller/status
+    # (t, fault_code, fault) from controller/status: the code one of ControllerStatus's FAULT_*
+    # (rwpend_control.status_codes; None in a bag recorded before the codes), the text for people
+    faults: list = field(default_factory=list)
     seq0: int = 0                                    # the plant's seq of sample 0
     #: the command the plant held over [t_k, t_k+1) -- what the motor got: the driver's
     #: ``applied`` on the rig, sim/true_state on the simulator; None when the bag has neither
@@ -143,14 +145,15 @@ def trim(d: RunData, origin_seq: int, duration: float) -> RunData:
     t0 = k0 * d.h
     return RunData(h=d.h, t=d.t[sl] - t0, truth={k: v[sl] for k, v in d.truth.items()},
                    switches=[(t - t0, *rest) for t, *rest in d.switches],
-                   faults=[(t - t0, f) for t, f in d.faults], seq0=origin_seq,
+                   faults=[(t - t0, *rest) for t, *rest in d.faults], seq0=origin_seq,
                    u_held=None if d.u_held is None else d.u_held[sl],
                    **{name: getattr(d, name)[sl] for name in ARRAYS if name != 'mc'},
                    mc=d.mc[sl] - (d.mc[k0] if np.isfinite(d.mc[k0]) else 0.0))
 
 
 def _status(bag, seq0: int, h: float) -> tuple[list, list]:
-    """Mode/law changes and faults reported on controller/status."""
+    """Mode/law changes and faults reported on controller/status (:attr:`RunData.switches`,
+    :attr:`RunData.faults`)."""
     from rwpend_bag import cdr
     names = [n for n, t in bag.topics.items() if _short(t.type) == 'ControllerStatus' and t.count]
     if not names:
@@ -159,6 +162,7 @@ def _status(bag, seq0: int, h: float) -> tuple[list, list]:
     c, _ = cdr.decode(t.type, t.schema, t.datas, None)
     switches, faults = [], []
     last = None
+    codes = c.get('fault_code')         # a bag recorded before ControllerStatus had codes: none
     for i in range(len(c['seq'])):
         ts = (int(c['seq'][i]) - seq0) * h
         key = (str(c['mode'][i]), str(c['law'][i]))
@@ -166,5 +170,5 @@ def _status(bag, seq0: int, h: float) -> tuple[list, list]:
             switches.append((ts, key[0], key[1], str(c['reason'][i])))
             last = key
         if str(c['fault'][i]):
-            faults.append((ts, str(c['fault'][i])))
+            faults.append((ts, None if codes is None else int(codes[i]), str(c['fault'][i])))
     return switches, faults

@@ -68,7 +68,7 @@ def simulate(rig, run: Run, duration: float | None = None, plant_rig=None) -> Ru
         if st is not None and st.event is not None:
             switches.append((k * h, st.mode, st.law, st.reason))
         if st is not None and st.fault:
-            faults.append((k * h, st.fault))
+            faults.append((k * h, st.fault_code, st.fault))
         s = r.truth
         for key, v in (('pc', r.pendulum_counts), ('mc', r.motor_counts), ('u', tick.u or 0.0),
                        ('true_theta', s.theta), ('true_theta_dot', s.theta_dot),

@@ -31,7 +31,6 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Optional
 
-from rwpend_control.supervisor import Status
 from rwpend_ros.gate import CommandGate
 from rwpend_sim.sim_core import Reading, SimHardware
 from rwpend_estimation.estimators import DuplicateSampleError, Estimate
@@ -77,9 +76,7 @@ class ControllerStage:
                                 now=now, resyncs=e.resyncs)
         except Exception as exc:  # noqa: BLE001 - a fault in a law: zero torque, reported
             self.law_errors += 1
-            u, st = 0.0, Status(t=t, seq=seq, mode=ctrl.mode, law=ctrl.law, last_switch=ctrl.last_switch,
-                                switch_count=ctrl.switch_count, reason=ctrl.reason,
-                                fault=f'internal error: {type(exc).__name__}: {exc}')
+            u, st = 0.0, ctrl.internal_error(t, seq, exc)
         if not math.isfinite(u) or abs(u) > ctrl.u_max:   # pragma: no cover - saturated by update
             u = 0.0
         return u, st

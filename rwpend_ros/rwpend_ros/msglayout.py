@@ -3,8 +3,9 @@
 * The ``.msg`` files are looked up under ``<prefix>/share/<pkg>/msg/`` for every prefix of
   ``$AMENT_PREFIX_PATH`` (then ``sys.prefix``): where rosidl installs them, the files rclpy's
   own serializer is generated from (:func:`msg_text`).
-* rosbags parses them (:func:`fields`, :func:`parse`); :func:`leaves` flattens a type's nested
-  messages into dotted paths (``header.stamp.sec``).
+* rosbags parses them (:func:`fields`, :func:`parse`; :func:`constants` for the enumerated
+  values); :func:`leaves` flattens a type's nested messages into dotted paths
+  (``header.stamp.sec``).
 * :func:`layout` applies CDR's alignment (:func:`align`) to a run of primitive fields and gives
   its ``struct.Struct``; :func:`run` / :func:`runs` name the run by its fields, :func:`segments`
   cuts a type at its strings and sequences (whose length is known only from the bytes),
@@ -125,6 +126,19 @@ def parse(text: str, type_name: str) -> dict[str, list[Field]]:
     except TypesysError as exc:
         raise ValueError(f'cannot parse the definition of {type_name}: {exc}') from exc
     return {name: [_field(n, d) for n, d in defs] for name, (_consts, defs) in types.items()}
+
+
+@functools.lru_cache(maxsize=None)
+def constants(type_name: str) -> dict[str, int | float | str]:
+    """The constants of a type (``uint8 FAULT_NONE=0`` -> ``{'FAULT_NONE': 0}``), from its
+    installed .msg file: what code that cannot import the generated message (pure code) names
+    the message's enumerated values by."""
+    name = full_type(type_name)
+    try:
+        types = get_types_from_msg(msg_text(name), name)
+    except TypesysError as exc:
+        raise ValueError(f'cannot parse the definition of {name}: {exc}') from exc
+    return {n: v for n, _t, v in types[name][0]}
 
 
 @functools.lru_cache(maxsize=None)

@@ -336,17 +336,19 @@ def pack_diagnostic_array(sec: int, nanosec: int, statuses, frame_id: str = '') 
 
 _codec(STATUS, _HDR, ('seq', 'mode'), ('law',), ('u', 'u_unsaturated', 'friction_compensation', 'saturated',
                                                  'last_switch.sec', 'last_switch.nanosec', 'switch_count',
-                                                 'reason'), ('fault',))
+                                                 'switch_code', 'reason'), ('fault_code', 'fault'))
 _STATUS_SEQ_MODE, _STATUS_LAW, _STATUS_U_SWITCH, _STATUS_FAULT = (runs(STATUS, s) for s in segments(STATUS)[1:])
 
 
 def pack_controller_status(header: bytes, seq: int, mode: str, law: str, u: float, u_unsaturated: float,
                            friction_compensation: float, saturated: bool, last_switch: tuple[int, int],
-                           switch_count: int, reason: str, fault: str) -> bytes:
+                           switch_count: int, switch_code: int, reason: str, fault_code: int,
+                           fault: str) -> bytes:
     """rwpend_msgs/ControllerStatus as wire bytes, its alignment padding zeros: rclpy's
     serializer leaves the padding as it finds it in a reused buffer, so two lockstep runs
     published the same status with different bytes (a bag that is not "the same bag",
-    rwpend_bag.sameness). ``last_switch``: (sec, nanosec)."""
+    rwpend_bag.sameness). ``last_switch``: (sec, nanosec); ``switch_code``, ``fault_code``: the
+    message's SWITCH_* and FAULT_* constants."""
     out = bytearray(header)
     m, la, r, f = _string(mode), _string(law), _string(reason), _string(fault)
     _put(out, _STATUS_SEQ_MODE, seq, len(m))
@@ -354,8 +356,8 @@ def pack_controller_status(header: bytes, seq: int, mode: str, law: str, u: floa
     _put(out, _STATUS_LAW, len(la))
     out += la
     _put(out, _STATUS_U_SWITCH, u, u_unsaturated, friction_compensation, saturated, *last_switch,
-         switch_count & _U32_MAX, len(r))
+         switch_count & _U32_MAX, switch_code, len(r))
     out += r
-    _put(out, _STATUS_FAULT, len(f))
+    _put(out, _STATUS_FAULT, fault_code, len(f))
     out += f
     return ENCAPSULATION + bytes(out)

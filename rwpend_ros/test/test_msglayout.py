@@ -116,7 +116,7 @@ def test_runs_and_segments_of_the_loop_messages():
         ['<Qii'] + [f'<{8 - k}xQii' for k in range(1, 8)]
     assert segments(wire.STATUS)[1:] == (('seq', 'mode'), ('law',), (
         'u', 'u_unsaturated', 'friction_compensation', 'saturated', 'last_switch.sec', 'last_switch.nanosec',
-        'switch_count', 'reason'), ('fault',))
+        'switch_count', 'switch_code', 'reason'), ('fault_code', 'fault'))
     with pytest.raises(ValueError, match='variable length'):
         run(wire.STATUS, ('seq', 'mode', 'law'))
     with pytest.raises(ValueError, match='not seq, theta'):

@@ -159,15 +159,17 @@ def test_truncated_raises_struct_error(unpack, data):
 @pytest.mark.parametrize('mode,law,reason,fault', [('auto', 'catch', 'catch: |theta-pi|=0.496<0.5', ''),
                                                    ('off', 'off', '', 'stale state: 12 ms old'),
                                                    ('balance', 'balance', 'x' * 7, 'y' * 5)])
-def test_controller_status_pack(frame, mode, law, reason, fault):
+@pytest.mark.parametrize('switch_code,fault_code', [(0, 0), (2, 1), (12, 255)])
+def test_controller_status_pack(frame, mode, law, reason, fault, switch_code, fault_code):
     """Decodes to the message rclpy builds, as long as its serialization, padding zeros."""
     from rwpend_msgs.msg import ControllerStatus
     data = wire.pack_controller_status(wire.pack_header(12, 345_678_901, frame), 3989, mode, law, -0.8, -12.5,
-                                       0.25, True, (3, 500_000_000), 4, reason, fault)
+                                       0.25, True, (3, 500_000_000), 4, switch_code, reason, fault_code, fault)
     ref = header(ControllerStatus(), frame)
     ref.seq, ref.mode, ref.law, ref.u, ref.u_unsaturated = 3989, mode, law, -0.8, -12.5
     ref.friction_compensation, ref.saturated, ref.switch_count = 0.25, True, 4
     ref.last_switch.sec, ref.last_switch.nanosec = 3, 500_000_000
     ref.reason, ref.fault = reason, fault
+    ref.switch_code, ref.fault_code = switch_code, fault_code
     assert deserialize_message(data, ControllerStatus) == ref
     assert len(data) == len(serialize_message(ref))

@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from rwpend_bag import msgdefs
+from rwpend_control.status_codes import FAULT_NONE, SWITCH_CATCH, SWITCH_SET_MODE
 
 TYPES = {'/rwpend/encoders': 'rwpend_msgs/msg/EncoderCounts',
          '/rwpend/command': 'rwpend_msgs/msg/MotorCommand',
@@ -87,7 +88,8 @@ def make_run(duration=10.0, rate=1000.0, t_up=3.0, lc_period=2.0, lc_amp=0.5, la
                 header=hdr, seq=k, mode='auto', law=law, u=u, u_unsaturated=u * 1.2,
                 friction_compensation=0.0, saturated=abs(u) >= 10,
                 last_switch=Time(sec=last_switch // 1_000_000_000, nanosec=last_switch % 1_000_000_000),
-                switch_count=switches, reason='', fault='')
+                switch_count=switches, switch_code=SWITCH_SET_MODE if law == 'swingup' else SWITCH_CATCH,
+                reason='', fault_code=FAULT_NONE, fault='')
             out.append(('/rwpend/controller/status', ns + 200_000,
                         bytes(ser(cs, 'rwpend_msgs/msg/ControllerStatus'))))
     out.sort(key=lambda x: x[1])
