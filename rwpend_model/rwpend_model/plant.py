@@ -330,13 +330,10 @@ class Plant:
         self._x = [th, thd, thr, thrd]
         self._tau = tau0
         self._stuck = stuck
-        w = thrd - thd
-        tau_eff = self._torque_available(tau0, w)
         if stuck:
             self._friction = self._required_friction(th, thd, tau0)
         else:
-            self._friction = self._kinetic_friction(w) if self.friction_on else 0.0
-        self._tau_eff = tau_eff
+            self._friction = self._kinetic_friction(thrd - thd) if self.friction_on else 0.0
         self.t += self.h
 
     def _free_motion(self):
@@ -352,7 +349,7 @@ class Plant:
         te = self._te
         tau = u + (self._tau - u) * math.exp(-self.h / te) if te > 0 else u
         fb = self._fbreak if self.friction_on else 0.0
-        self._tau = self._tau_eff = tau
+        self._tau = tau
         self._friction = max(-fb, min(fb, tau))
         self._stuck = True
         self.t += self.h
