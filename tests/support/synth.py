@@ -97,7 +97,7 @@ def make_run(duration=10.0, rate=1000.0, t_up=3.0, lc_period=2.0, lc_amp=0.5, la
 
 
 def write_ours(path, records, qos=None):
-    from .writer import BagWriter, default_qos
+    from rwpend_bag.writer import BagWriter, default_qos
     w = BagWriter(path)
     for topic, typ in TYPES.items():
         w.add_topic(topic, typ, [qos or default_qos(depth=10, history='keep_last')])
