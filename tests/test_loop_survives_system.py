@@ -36,7 +36,9 @@ RWPEND = str(ROOT / 'rwpend')
 @pytest.mark.timeout(150)
 def test_up_fails_with_the_reason_when_the_loop_is_dead_at_the_end(tmp_path, ros_env):
     bag = tmp_path / 'dead'
-    up = subprocess.Popen([RWPEND, 'up', '--mode', 'auto', '--duration', '20', '--record', str(bag),
+    # --duration (from the plant's sample 0): the catch came at 3.7-3.9 s of it, then the loop must
+    # be dead for loop_dead_after (2 s) before the end -- 14 s leaves a catch up to ~11 s room
+    up = subprocess.Popen([RWPEND, 'up', '--mode', 'auto', '--duration', '14', '--record', str(bag),
                            '--composed', 'none'], env=ros_env, stdout=subprocess.PIPE,
                           stderr=subprocess.STDOUT, text=True)
     lines = []
@@ -90,7 +92,9 @@ def test_stalled_estimator_resynchronises_and_the_controller_starts_afresh(tmp_p
     Whether the 0.5 s stop loses samples depends on the host (measured, not judged); every
     sample the estimator missed is re-synchronised or bridged over. Outcomes only, no timing."""
     bag = tmp_path / 'bag'
-    up = subprocess.Popen([RWPEND, 'up', '--mode', 'auto', '--duration', '40', '--record', str(bag),
+    # --duration (from the plant's sample 0): the catch came at 3.7-3.9 s of it, the two stops
+    # end ~10 s after the catch; 28 s leaves a catch up to ~15 s room and >= 10 s of life after
+    up = subprocess.Popen([RWPEND, 'up', '--mode', 'auto', '--duration', '28', '--record', str(bag),
                            '--composed', 'none'], env=ros_env, stdout=subprocess.PIPE,
                           stderr=subprocess.STDOUT, text=True)
     lines = []
