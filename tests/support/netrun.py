@@ -9,6 +9,8 @@ network tests (tests/test_network_system.py). Pure Python (subprocess), no rclpy
     run.wait_for_log(1, 'auto/swingup -> auto/catch', timeout=60)
     ...
     codes = run.finish(timeout=120)     # the plant ends at --duration, then the others stop
+    # or, once the test has seen what it needs (--duration a bound):
+    codes = run.end_now()               # Ctrl-C to the plant, then to the others
 """
 from __future__ import annotations
 
@@ -103,6 +105,16 @@ class SplitRun:
                 part.proc.wait(timeout=max(0.1, end - time.monotonic()))
             except subprocess.TimeoutExpired:
                 pass
+        time.sleep(settle)
+        return self.stop()
+
+    def end_now(self, settle: float = 2.0) -> dict[str, int | None]:
+        """End the run before its ``--duration`` (a bound, once the test has seen what it needs):
+        Ctrl-C to the plant's hosts, then, ``settle`` s later, to the others as :meth:`finish`
+        does -- the plant ends first, as at its duration, so the others answer its last samples
+        and the recorder takes them; {host: exit status}."""
+        for part in self.plant_parts():
+            _interrupt(part.proc)
         time.sleep(settle)
         return self.stop()
 
