@@ -230,39 +230,64 @@ def test_catch_makes_no_jump_beyond_the_patched_design(auto_run):
 
 
 # ----------------------------------------------------------------------------- live gain change
+#: one process for every wait of the test (a process of its own per wait took ~2 s each to start
+#: rclpy): per request on stdin ``T_MIN LAW WALL`` it subscribes anew -- volatile, so it sees only
+#: statuses published after the request, as a process started then did -- waits for the first
+#: status stamped >= T_MIN s (sim time) with law LAW ('*': any), unsubscribes and prints that
+#: stamp ('none' after WALL s)
 WAIT_STATUS = r'''
 import sys, time
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rwpend_msgs.msg import ControllerStatus
-ns, t_min, law, wall = sys.argv[1], float(sys.argv[2]), sys.argv[3], float(sys.argv[4])
+topic = sys.argv[1].rstrip('/') + '/controller/status'
 rclpy.init()
 node = Node('wait_controller_status')
-seen = []
-def cb(m):
-    t = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
-    if not seen and t >= t_min and (law == '*' or m.law == law):
-        seen.append(t)
-node.create_subscription(ControllerStatus, ns.rstrip('/') + '/controller/status', cb,
-                         QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=100))
-end = time.monotonic() + wall
-while not seen and time.monotonic() < end:
-    rclpy.spin_once(node, timeout_sec=0.1)
+qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=100)
+print('ready', flush=True)
+for line in sys.stdin:
+    t_min, law, wall = float(line.split()[0]), line.split()[1], float(line.split()[2])
+    seen = []
+    def cb(m):
+        t = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+        if not seen and t >= t_min and (law == '*' or m.law == law):
+            seen.append(t)
+    sub = node.create_subscription(ControllerStatus, topic, cb, qos)
+    end = time.monotonic() + wall
+    while not seen and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    node.destroy_subscription(sub)
+    print(repr(seen[0]) if seen else 'none', flush=True)
 node.destroy_node()
 rclpy.shutdown()
-if not seen:
-    sys.exit('no controller/status with stamp >= %g s and law %s within %g s' % (t_min, law, wall))
-print(repr(seen[0]))
 '''
 
 
-def wait_status(env, t_min, law='*', wall=150.0):
-    """Block until the controller publishes a status stamped >= t_min (sim time), law matching;
-    return that stamp."""
-    p = run(['exec', 'python', '-c', WAIT_STATUS, '/rwpend', repr(float(t_min)), law, repr(wall)], env,
-            timeout=wall + 60)
-    return float(p.stdout.strip().splitlines()[-1])
+class StatusWaiter:
+    """``waiter(t_min, law)``: block until the controller publishes a status stamped >= t_min
+    (sim time), law matching, after the call; return that stamp (the WAIT_STATUS process)."""
+
+    def __init__(self, env):
+        self.proc = subprocess.Popen([RWPEND, 'exec', 'python', '-u', '-c', WAIT_STATUS, '/rwpend'], env=env,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        assert self.proc.stdout.readline().strip() == 'ready', 'the status waiter did not start'
+
+    def __call__(self, t_min, law='*', wall=150.0):
+        self.proc.stdin.write(f'{float(t_min)!r} {law} {float(wall)!r}\n')
+        self.proc.stdin.flush()
+        got = self.proc.stdout.readline().strip()
+        assert got not in ('', 'none'), f'no controller/status with stamp >= {t_min:g} s and law {law} within {wall:g} s'
+        return float(got)
+
+    def close(self):
+        if self.proc.poll() is None:
+            self.proc.stdin.close()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
 
 
 def gains_args(params):
@@ -287,24 +312,28 @@ def test_live_gain_change_takes_effect_and_unstable_set_is_refused(tmp_path, ros
     stack = subprocess.Popen([RWPEND, 'up', '--lockstep', '--mode', 'balance', '--theta0', '3.1416',
                               '--duration', '3600', '--record', str(bag_dir)], env=ros_env, stdout=log,
                              stderr=subprocess.STDOUT, text=True)
+    wait_status = None
     try:
         p = run(['param', 'get', 'controller', 'mode', *old], ros_env, timeout=120)
         assert 'mode: balance' in p.stdout
         for n, v in old.items():
             assert f'{n}: {v!r}' in p.stdout, p.stdout
-        t_before = wait_status(ros_env, 6.0, 'balance')          # settled at the old gains
+        wait_status = StatusWaiter(ros_env)
+        t_before = wait_status(6.0, 'balance')          # settled at the old gains
         run(['param', 'set', 'controller', *gains_args(new)], ros_env)
-        t_set = wait_status(ros_env, 0.0)                            # the set has returned by now
-        t_after = wait_status(ros_env, t_set + 6.0, 'balance')       # settled at the new gains
+        t_set = wait_status(0.0)                            # the set has returned by now
+        t_after = wait_status(t_set + 6.0, 'balance')       # settled at the new gains
         p = run(['param', 'set', 'controller', *gains_args(unstable)], ros_env, check=False)
         assert p.returncode == 1, (p.stdout, p.stderr)
         assert 'unstable' in p.stderr, p.stderr
         got = run(['param', 'get', 'controller', *new], ros_env).stdout
         for n, v in new.items():
             assert f'{n}: {v!r}' in got, got                        # the accepted set stays
-        t_end = wait_status(ros_env, 0.0) + 1.0
-        wait_status(ros_env, t_end)
+        t_end = wait_status(0.0) + 1.0
+        wait_status(t_end)
     finally:
+        if wait_status is not None:
+            wait_status.close()
         stack.send_signal(signal.SIGINT)
         try:
             stack.wait(timeout=60)
