@@ -52,6 +52,6 @@ def test_a_faulty_law_never_crashes_the_controller(ros_env, tmp_path):
     d = load_run(bag, 0.001)
     k = int(np.nonzero(d.u == 0.0)[0][0])
     assert 0.29 <= d.t[k] <= 0.32 and np.all(d.u[k:] == 0.0) and np.all(d.u[1:k] == 2.0)
-    assert any('law fault' in f for _, f in d.faults)
+    assert any('law fault' in f for _, _, f in d.faults)      # (t, fault_code, fault)
     assert d.switches[-1][1] == 'off'
     assert len(d.u) == 1000     # the controller answered every sample to the end
