@@ -4,7 +4,7 @@ The loop's process records the bytes its nodes publish, as rosbag2's composable 
 Writing them (log-time order, ``seq`` tracking, zstd chunks: :class:`rwpend_bag.writer.BagSink`)
 in a thread of that process takes the interpreter lock from the loop's thread for as long as
 the loop itself runs: in lockstep, 60 s of samples at 1 kHz took 15.2 s of wall time with the
-writer thread against 8.6 s with this one (PERFORMANCE.md, "The loop"). Here the loop's
+writer thread against 8.6 s with this one (PERFORMANCE.md, "What each mechanism buys"). Here the loop's
 process only appends ``(topic, bytes, time)`` to a queue; a sender thread hands batches of them
 to a child process through a pipe (one pickle per batch), and the child writes the bag, below a
 real-time loop (:func:`_below_the_loop`).
