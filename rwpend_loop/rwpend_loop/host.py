@@ -496,6 +496,18 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
     return a, ros
 
 
+def dump_traces(nodes) -> None:
+    """Write the trace of every node that has one (rwpend_ros.trace: RWPEND_TRACE set), as
+    :func:`rwpend_ros.runner.run_node` does for a node of its own; an error is printed."""
+    for node in nodes:
+        trace = getattr(node, 'trace', None)
+        if trace is not None:
+            try:
+                trace.dump()
+            except OSError as exc:
+                print(f'trace of {node.get_name()} not written: {exc}', file=sys.stderr, flush=True)
+
+
 def main(argv=None) -> int:
     """Build the nodes, run the executor in this thread and the loop in its own until SIGINT /
     SIGTERM or the simulator's ``duration``; returns the exit status (2: a bad parameter, 3: the
@@ -543,6 +555,7 @@ def main(argv=None) -> int:
         if host is not None:
             host.close()
             close_nodes(host.nodes)
+            dump_traces(host.nodes)
             for node in host.nodes:
                 try:
                     node.destroy_node()
