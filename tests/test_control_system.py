@@ -17,6 +17,7 @@ import json
 import math
 import signal
 import subprocess
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -294,46 +295,30 @@ def gains_args(params):
     return [a for n, v in params.items() for a in (n, repr(float(v)))]
 
 
-@pytest.mark.timeout(400)
-def test_live_gain_change_takes_effect_and_unstable_set_is_refused(tmp_path, ros_env):
+def gain_sets() -> tuple[dict, dict, dict]:
+    """(the controller's default balance gains, a stable new set, an unstable set) as parameters."""
     old = designed('pdd', '--w0', '1.5wp')['params']                 # the controller's default
     new_design = designed('pdd', '--w0', '2wp')
     assert new_design['stable']
-    new = new_design['params']
     # the printed sign of (6.4) (ERRATA E39): kpp = -omega_p kdp makes kpp positive -> unstable
     patch = designed('patch', '--w0', '1.5wp')['gains']
     unstable = {'balance.kpp': -RIG.omega_p * patch['kdp'], 'balance.kdp': patch['kdp'],
                 'balance.kpr': 0.0, 'balance.kdr': patch['kdr']}
-    bag_dir = tmp_path / 'gains'
-    log_path = tmp_path / 'stack.log'
+    return old, new_design['params'], unstable
+
+
+@contextmanager
+def balancing_lockstep_stack(env, bag_dir: Path, log_path: Path):
+    """``./rwpend up --lockstep --mode balance`` from upright, recorded, stopped (Ctrl-C) at the
+    end of the block; it must end cleanly. Lockstep runs several times faster than real time; the
+    block stops the stack itself, so its duration is only a bound that each wait must stay far from."""
     log = open(log_path, 'w')
-    # lockstep runs several times faster than real time; the test stops the stack itself, so its
-    # duration is only a bound that each wait below must stay far from
     stack = subprocess.Popen([RWPEND, 'up', '--lockstep', '--mode', 'balance', '--theta0', '3.1416',
-                              '--duration', '3600', '--record', str(bag_dir)], env=ros_env, stdout=log,
+                              '--duration', '3600', '--record', str(bag_dir)], env=env, stdout=log,
                              stderr=subprocess.STDOUT, text=True)
-    wait_status = None
     try:
-        p = run(['param', 'get', 'controller', 'mode', *old], ros_env, timeout=120)
-        assert 'mode: balance' in p.stdout
-        for n, v in old.items():
-            assert f'{n}: {v!r}' in p.stdout, p.stdout
-        wait_status = StatusWaiter(ros_env)
-        t_before = wait_status(6.0, 'balance')          # settled at the old gains
-        run(['param', 'set', 'controller', *gains_args(new)], ros_env)
-        t_set = wait_status(0.0)                            # the set has returned by now
-        t_after = wait_status(t_set + 6.0, 'balance')       # settled at the new gains
-        p = run(['param', 'set', 'controller', *gains_args(unstable)], ros_env, check=False)
-        assert p.returncode == 1, (p.stdout, p.stderr)
-        assert 'unstable' in p.stderr, p.stderr
-        got = run(['param', 'get', 'controller', *new], ros_env).stdout
-        for n, v in new.items():
-            assert f'{n}: {v!r}' in got, got                        # the accepted set stays
-        t_end = wait_status(0.0) + 1.0
-        wait_status(t_end)
+        yield stack
     finally:
-        if wait_status is not None:
-            wait_status.close()
         stack.send_signal(signal.SIGINT)
         try:
             stack.wait(timeout=60)
@@ -345,10 +330,40 @@ def test_live_gain_change_takes_effect_and_unstable_set_is_refused(tmp_path, ros
     assert stack.returncode == 0, out[-3000:]
     assert 'Traceback' not in out, out[-3000:]
 
-    bag = read_bag(bag_dir)
+
+def change_gains_live(env, old: dict, new: dict, unstable: dict) -> tuple[float, float, float]:
+    """Against the running stack: the old gains in use; the new set applied with the param tool
+    once balanced; the unstable set refused with its reason, the new set staying. (t_before: a
+    status settled at the old gains, t_set: the first after the set returned, t_end: the last the
+    run must reach), sim time s."""
+    p = run(['param', 'get', 'controller', 'mode', *old], env, timeout=120)
+    assert 'mode: balance' in p.stdout
+    for n, v in old.items():
+        assert f'{n}: {v!r}' in p.stdout, p.stdout
+    wait_status = StatusWaiter(env)
+    try:
+        t_before = wait_status(6.0, 'balance')              # settled at the old gains
+        run(['param', 'set', 'controller', *gains_args(new)], env)
+        t_set = wait_status(0.0)                            # the set has returned by now
+        wait_status(t_set + 6.0, 'balance')                 # settled at the new gains
+        p = run(['param', 'set', 'controller', *gains_args(unstable)], env, check=False)
+        assert p.returncode == 1, (p.stdout, p.stderr)
+        assert 'unstable' in p.stderr, p.stderr
+        got = run(['param', 'get', 'controller', *new], env).stdout
+        for n, v in new.items():
+            assert f'{n}: {v!r}' in got, got                # the accepted set stays
+        t_end = wait_status(0.0) + 1.0
+        wait_status(t_end)
+    finally:
+        wait_status.close()
+    return t_before, t_set, t_end
+
+
+def gains_switch(bag, old: dict, new: dict) -> tuple[float, int]:
+    """Every recorded command is the balance law with the old or the new gains at its state
+    estimate, and they switch once, old to new: (sim time of the switch, its command index)."""
     cmd = series(bag, '/rwpend/command')
     est = series(bag, '/rwpend/state')
-    truth = series(bag, '/rwpend/sim/true_state')
     status = series(bag, '/rwpend/controller/status')
     assert set(status['law']) == {'balance'} and set(status['mode']) == {'balance'}
     j = np.searchsorted(est['seq'], cmd['seq'])
@@ -367,17 +382,17 @@ def test_live_gain_change_takes_effect_and_unstable_set_is_refused(tmp_path, ros
     only_new = np.nonzero(is_new & ~is_old)[0]
     assert only_new.size
     c = only_new[0]
-    t_c = cmd['seq'][c] * H
     # one switch: the old gains up to the change, the new ones from then on (also after the
     # refused unstable set, which came later)
     assert np.all(is_old[:c]) and np.all(is_new[c:]), 'the gain set changed more than once'
-    assert t_before <= t_c <= t_set + 1e-9, (t_before, t_c, t_set)
-    assert cmd['seq'][-1] * H >= t_end - 1e-9
-    # measured: change at 7.58 s and 8.71 s in two runs (the tools take wall time); status stamps = sim time
+    return float(cmd['seq'][c] * H), int(cmd['seq'][-1])
 
-    # the loop's behaviour changes as the designs predict: the wheel settles where the
-    # wheel-rate term balances the rotor friction, 53.8 rad/s with kdr = -0.0300 (1.5 omega_p),
-    # 16.6 rad/s with kdr = -0.0712 (2 omega_p); measured 53.4 and 16.7
+
+def assert_wheel_settles_as_designed(bag, t_c: float, old: dict, new: dict) -> None:
+    """The loop's behaviour changes as the designs predict: the wheel settles where the
+    wheel-rate term balances the rotor friction, 53.8 rad/s with kdr = -0.0300 (1.5 omega_p),
+    16.6 rad/s with kdr = -0.0712 (2 omega_p); measured 53.4 and 16.7. Balanced throughout."""
+    truth = series(bag, '/rwpend/sim/true_state')
     t = truth['seq'] * H
     w = truth['wheel_rate']
     w_old = w[(t >= t_c - 3.0) & (t < t_c)].mean()
@@ -387,6 +402,20 @@ def test_live_gain_change_takes_effect_and_unstable_set_is_refused(tmp_path, ros
     assert w_old == pytest.approx(pred_old, rel=0.2), (w_old, pred_old)
     assert w_new == pytest.approx(pred_new, rel=0.2), (w_new, pred_new)
     assert np.all(np.abs(deviation(truth['theta'])) < BALANCED), 'balanced throughout'
+
+
+@pytest.mark.timeout(400)
+def test_live_gain_change_takes_effect_and_unstable_set_is_refused(tmp_path, ros_env):
+    old, new, unstable = gain_sets()
+    bag_dir = tmp_path / 'gains'
+    with balancing_lockstep_stack(ros_env, bag_dir, tmp_path / 'stack.log'):
+        t_before, t_set, t_end = change_gains_live(ros_env, old, new, unstable)
+    bag = read_bag(bag_dir)
+    t_c, last_seq = gains_switch(bag, old, new)
+    assert t_before <= t_c <= t_set + 1e-9, (t_before, t_c, t_set)
+    assert last_seq * H >= t_end - 1e-9
+    # measured: change at 7.58 s and 8.71 s in two runs (the tools take wall time); status stamps = sim time
+    assert_wheel_settles_as_designed(bag, t_c, old, new)
 
 
 # ----------------------------------------------------------------------------- 60 s of balance
