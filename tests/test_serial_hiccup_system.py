@@ -85,22 +85,20 @@ def diagnostics(bag):
     return out
 
 
-@pytest.mark.timeout(200)
-def test_stall_and_unplug_while_balancing(tmp_path, ros_env):
-    link = tmp_path / 'rig'
-    bag = tmp_path / 'hiccups'
-    emu_log = tmp_path / 'emulator.log'
+def start_balancing_on_the_emulator(tmp_path, env, link, bag, emu_log):
+    """The emulator on ``link`` and ``./rwpend up --plant serial:LINK --mode auto`` recording to
+    ``bag``, waited for until the pendulum has balanced for 2 s while recorded; (emulator, stack,
+    the emulator's clock origin)."""
     emu = subprocess.Popen([RWPEND, 'emulate', '--link', str(link), '--rt-priority', '60', '--json',
-                            '--status-period', '0.05'], env=ros_env, stdout=open(emu_log, 'w'),
+                            '--status-period', '0.05'], env=env, stdout=open(emu_log, 'w'),
                            stderr=subprocess.STDOUT)
     stack = None
-    t = {}
     try:
         origin = wait_event(emu_log, lambda e: e['event'] == 'ready', 30)['clock_origin']
         stack = subprocess.Popen([RWPEND, 'up', '--plant', f'serial:{link}', '--mode', 'auto',
                                   '--duration', '120', '--record', str(bag), '--rt-priority', '50',
                                   '--composed', 'control'],
-                                 env=ros_env, stdout=open(tmp_path / 'up.log', 'w'), stderr=subprocess.STDOUT)
+                                 env=env, stdout=open(tmp_path / 'up.log', 'w'), stderr=subprocess.STDOUT)
         end = time.monotonic() + 90
         recording = None            # the emulator's time when the recorder had the encoders
         while recording is None or balanced_for(events(emu_log), 2.0, after=recording) is None:
@@ -109,58 +107,76 @@ def test_stall_and_unplug_while_balancing(tmp_path, ros_env):
             if recording is None and 'recording /rwpend/encoders' in (tmp_path / 'up.log').read_text():
                 recording = time.monotonic() - origin
             time.sleep(0.3)
-        # 1. the driver process stalls for 0.2 s (the device's watchdog trips, the pty holds ~0.6 s)
-        drv = driver_pid(ros_env['ROS_DOMAIN_ID'])
-        t['stop'] = time.monotonic() - origin         # on the emulator's clock
-        os.kill(drv, signal.SIGSTOP)
-        time.sleep(0.2)
-        os.kill(drv, signal.SIGCONT)
-        time.sleep(5.0)
-        # 2. the cable is pulled for 0.5 s
-        emu.send_signal(signal.SIGUSR1)
-        time.sleep(0.5)
-        emu.send_signal(signal.SIGUSR2)
-        time.sleep(8.0)
-    finally:
-        if stack is not None and stack.poll() is None:
-            stack.send_signal(signal.SIGINT)
-            stack.wait(timeout=60)
-        emu.terminate()
-        emu.wait(timeout=10)
-    evs = events(emu_log)
-    report = {}
+    except BaseException:
+        stop_stack_and_emulator(emu, stack)
+        raise
+    return emu, stack, origin
 
-    # --- the stall: the device's watchdog zeroed the motor, the driver re-enabled it, the loop
-    # balanced again (the pendulum hardly moves in 0.2 s)
-    trip = next(e for e in evs if e['event'] == 'watchdog_trip' and e['t'] > t['stop'])
-    report['stall_watchdog_after_s'] = round(trip['t'] - t['stop'], 3)
+
+def stop_stack_and_emulator(emu, stack) -> None:
+    if stack is not None and stack.poll() is None:
+        stack.send_signal(signal.SIGINT)
+        stack.wait(timeout=60)
+    emu.terminate()
+    emu.wait(timeout=10)
+
+
+def stall_then_unplug(emu, domain: str, origin: float) -> float:
+    """The driver process stalled for 0.2 s (the device's watchdog trips, the pty holds ~0.6 s),
+    then 5 s later the cable pulled for 0.5 s, then 8 s of the stack running on; the stall's
+    start on the emulator's clock."""
+    drv = driver_pid(domain)
+    t_stop = time.monotonic() - origin
+    os.kill(drv, signal.SIGSTOP)
+    time.sleep(0.2)
+    os.kill(drv, signal.SIGCONT)
+    time.sleep(5.0)
+    emu.send_signal(signal.SIGUSR1)
+    time.sleep(0.5)
+    emu.send_signal(signal.SIGUSR2)
+    time.sleep(8.0)
+    return t_stop
+
+
+def judge_the_stall(evs, t_stop: float, report: dict) -> None:
+    """The device's watchdog zeroed the motor, the driver re-enabled it before the unplug, the
+    loop balanced again (the pendulum hardly moves in 0.2 s)."""
+    trip = next(e for e in evs if e['event'] == 'watchdog_trip' and e['t'] > t_stop)
+    report['stall_watchdog_after_s'] = round(trip['t'] - t_stop, 3)
     assert report['stall_watchdog_after_s'] < 0.2 + 0.5, 'the trip is the stall\'s (slack for a busy host)'
     unplug = next(e for e in evs if e['event'] == 'unplugged')
     assert any(e['event'] == 'enable' and trip['t'] < e['t'] < unplug['t'] for e in evs)
     assert balanced_for(evs, 1.0, after=trip['t']) is not None, 'not balanced again after the stall'
 
-    # --- the unplug: the motor at zero from the watchdog trip to fresh commands after the replug
+
+def judge_the_unplug(evs, report: dict) -> list[dict]:
+    """The motor at zero from the device's watchdog trip to fresh commands after the replug; the
+    emulator's statuses after the motor was enabled again."""
+    unplug = next(e for e in evs if e['event'] == 'unplugged')
     trip2 = next(e for e in evs if e['event'] == 'watchdog_trip' and e['t'] >= unplug['t'])
     assert trip2['since_command'] <= 0.05 + 0.015 + 0.05, trip2      # period + a sample + slack
     replug = next(e for e in evs if e['event'] == 'plugged' and e['t'] > unplug['t'])
     enabled = next(e for e in evs if e['event'] == 'enable' and e['t'] > replug['t'])
     out = [e for e in evs if e['event'] == 'status' and trip2['t'] < e['t'] < enabled['t']]
     assert out and all(e['u_applied'] == 0.0 and not e['enabled'] for e in out)
-    after = [e for e in evs if e['event'] == 'status' and e['t'] > enabled['t']]
     report['reconnect_s'] = round(enabled['t'] - replug['t'], 3)
     last = [e for e in evs if e['event'] == 'status'][-1]
     report.update({k: last[k] for k in ('rx_bad', 'dropped_tx', 'overruns', 'stalls', 'max_late_ms')})
+    return [e for e in evs if e['event'] == 'status' and e['t'] > enabled['t']]
 
-    # --- the bag: encoders' seq monotone, the outage a gap of about its length, counted
-    b = read_bag(bag)
-    enc = _decode(b, '/rwpend/encoders')
+
+def judge_the_bag(bag, report: dict) -> tuple[np.ndarray, int]:
+    """Encoders' seq monotone, the outage a gap of about its length, counted and said on the
+    driver's /diagnostics, connected again after the replug; (the encoders' seq, the first seq
+    after the outage)."""
+    enc = _decode(bag, '/rwpend/encoders')
     seq = enc['seq'].astype(np.int64)
     assert np.all(np.diff(seq) > 0), 'encoders seq went back or repeated'
     gaps = np.diff(seq)
     big = gaps.max()
     report['largest_seq_gap'] = int(big)
     assert big >= 500, 'the 0.5 s outage is a gap in seq'
-    diags = diagnostics(b)
+    diags = diagnostics(bag)
     final = diags[-1][3]
     report.update({k: int(final[k]) for k in ('link_losses', 'connects', 'outage_samples', 'samples_lost',
                                               'watchdog_trips', 'late_samples', 'old_commands',
@@ -173,8 +189,25 @@ def test_stall_and_unplug_while_balancing(tmp_path, ros_env):
     # connected again after the replug (the very last diagnostics may come from the driver's
     # close, the link already shut)
     assert any(v.get('connected') == 'True' and int(v.get('connects', 0)) >= 2 for _, _, _, v in diags)
-    first_after = seq[np.argmax(gaps) + 1]
+    first_after = int(seq[np.argmax(gaps) + 1])
     assert np.sum(seq >= first_after) > 3000, 'encoders after the replug'
+    return seq, first_after
+
+
+@pytest.mark.timeout(200)
+def test_stall_and_unplug_while_balancing(tmp_path, ros_env):
+    link, bag, emu_log = tmp_path / 'rig', tmp_path / 'hiccups', tmp_path / 'emulator.log'
+    emu, stack, origin = start_balancing_on_the_emulator(tmp_path, ros_env, link, bag, emu_log)
+    try:
+        t_stop = stall_then_unplug(emu, ros_env['ROS_DOMAIN_ID'], origin)
+    finally:
+        stop_stack_and_emulator(emu, stack)
+    evs = events(emu_log)
+    report = {}
+    judge_the_stall(evs, t_stop, report)
+    after = judge_the_unplug(evs, report)
+    b = read_bag(bag)
+    _, first_after = judge_the_bag(b, report)
     # the stack recovers: commands answer samples of the new connection and move the motor
     cmd = _decode(b, '/rwpend/command')
     state = _decode(b, '/rwpend/state')
