@@ -103,10 +103,10 @@ def _events(text):
     return out
 
 
-@pytest.mark.system
-@pytest.mark.timeout(90)
-def test_emulator_driver_unplug_replug_kill(tmp_path):
-    env = _env()
+def unplug_replug_kill(tmp_path, env) -> tuple[list, list, list, dict]:
+    """Emulator, driver and the test node; streaming for 2.5 s, the cable pulled for 1.5 s,
+    plugged again for 3 s, then the emulator killed and 1.5 s more. (the test node's encoder
+    samples and driver diagnostics, the emulator's events, the wall times of each phase)."""
     link = str(tmp_path / 'rig')
     stopfile = tmp_path / 'stop'
     out = tmp_path / 'node.json'
@@ -115,6 +115,7 @@ def test_emulator_driver_unplug_replug_kill(tmp_path):
                             '--rt-priority', '60'],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
     procs.append(emu)
+    t = {}
     try:
         _readline_until(emu, lambda l: '"ready"' in l, 20)
         drv = subprocess.Popen([PY, '-m', 'rwpend_driver.driver_node', '--ros-args', '-p', f'port:={link}',
@@ -125,7 +126,6 @@ def test_emulator_driver_unplug_replug_kill(tmp_path):
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         procs.append(node)
         _readline_until(node, lambda l: 'streaming' in l, 30)
-        t = {}
         time.sleep(2.5)
         t['unplug'] = time.monotonic()
         emu.send_signal(signal.SIGUSR1)
@@ -136,7 +136,7 @@ def test_emulator_driver_unplug_replug_kill(tmp_path):
         time.sleep(3.0)
         t['kill'] = time.monotonic()
         emu.kill()
-        emu_out, emu_err = emu.communicate(timeout=10)
+        emu_out, _ = emu.communicate(timeout=10)
         time.sleep(1.5)
         t['end'] = time.monotonic()
         stopfile.write_text('stop')
@@ -150,11 +150,11 @@ def test_emulator_driver_unplug_replug_kill(tmp_path):
                 p.kill()
                 p.wait(timeout=5)
     data = json.loads(out.read_text())
-    enc, diags = data['enc'], data['diags']
-    events = _events(emu_out)
-    report = {}
+    return data['enc'], data['diags'], _events(emu_out), t
 
-    # --- phase A: streaming at ~1 kHz, continuous seq, the command reaches the plant
+
+def judge_streaming(enc, diags, events, t, report) -> list[int]:
+    """Before the unplug: ~1 kHz, continuous seq, the command reaches the plant; the seqs."""
     a = [e for e in enc if e[0] < t['unplug']]
     seqs = [e[1] for e in a]
     gaps = sum(1 for x, y in zip(seqs, seqs[1:]) if y != x + 1)
@@ -169,8 +169,12 @@ def test_emulator_driver_unplug_replug_kill(tmp_path):
     st_a = [e for e in events if e['event'] == 'status' and e['t'] > 1.0 and e['connected'] and e['enabled']]
     assert any(abs(e['u_applied'] - U) < 1e-9 and e['commands'] > 100 for e in st_a), st_a[-3:]
     assert a[-1][3] - a[0][3] != 0                      # the wheel turns: motor counts change
+    return seqs
 
-    # --- unplug: the device's watchdog zeroes the motor within its period (device side)
+
+def judge_unplugged(enc, diags, events, t, report) -> dict:
+    """The device's watchdog zeroes the motor within its period (device side); the driver says
+    ERROR and publishes no encoders; the emulator's unplug event."""
     unplug = next(e for e in events if e['event'] == 'unplugged')
     trip = next(e for e in events if e['event'] == 'watchdog_trip' and e['t'] >= unplug['t'])
     report['trip_since_command_s'] = trip['since_command']
@@ -179,13 +183,14 @@ def test_emulator_driver_unplug_replug_kill(tmp_path):
     assert trip['since_command'] <= WATCHDOG + 0.015    # period + a sample + scheduling slack
     st_unplugged = [e for e in events if e['event'] == 'status' and not e['connected'] and e['t'] > trip['t']]
     assert st_unplugged and all(e['u_applied'] == 0.0 and not e['enabled'] for e in st_unplugged)
-
-    # --- driver while unplugged: ERROR, no encoders
     down = [d for d in diags if t['unplug'] + 0.3 < d[0] < t['replug']]
     assert down and all(d[1] == 2 for d in down), down[:2]
     assert not [e for e in enc if t['unplug'] + 0.2 < e[0] < t['replug']]
+    return unplug
 
-    # --- replug: reconnected, seq monotone, commands applied again
+
+def judge_replugged(enc, diags, events, t, report, seqs, unplug) -> None:
+    """Reconnected, seq monotone, commands applied again."""
     b = [e for e in enc if t['replug'] < e[0] < t['kill']]
     assert len(b) > 500
     assert b[0][1] > seqs[-1]
@@ -200,6 +205,15 @@ def test_emulator_driver_unplug_replug_kill(tmp_path):
     st_b = [e for e in events if e['event'] == 'status' and e['t'] > enabled_again['t'] + 0.3]
     assert any(abs(e['u_applied'] - U) < 1e-9 for e in st_b), st_b     # commands reach the plant again
 
+
+@pytest.mark.system
+@pytest.mark.timeout(90)
+def test_emulator_driver_unplug_replug_kill(tmp_path):
+    enc, diags, events, t = unplug_replug_kill(tmp_path, _env())
+    report = {}
+    seqs = judge_streaming(enc, diags, events, t, report)
+    unplug = judge_unplugged(enc, diags, events, t, report)
+    judge_replugged(enc, diags, events, t, report, seqs, unplug)
     # --- emulator killed: ERROR, no encoders
     assert not [e for e in enc if e[0] > t['kill'] + 0.2]
     dead = [d for d in diags if d[0] > t['kill'] + 0.5]
