@@ -30,8 +30,12 @@ def wrap(angle: float) -> float:
 
 
 def upright_deviation(theta: float) -> float:
-    """x = wrap(theta - pi): deviation from upright, theta measured from hanging (E38)."""
-    return wrap(theta - _PI)
+    """x = wrap(theta - pi): deviation from upright, theta measured from hanging (E38) (the
+    body of :func:`wrap` written out: every sample's path)."""
+    y = math.fmod((theta - _PI) + _PI, _TWO_PI)
+    if y <= 0.0:
+        y += _TWO_PI
+    return y - _PI
 
 
 def scaled_energy(theta: float, theta_dot: float, omega_p: float) -> float:
@@ -142,7 +146,7 @@ class Balance:
         self.rate_ref = float(rate_ref)
 
     def __call__(self, theta: float, theta_dot: float, wheel_angle: float, wheel_rate: float) -> float:
-        x = wrap(theta - _PI)
+        x = upright_deviation(theta)
         return (-self.kpp * x - self.kdp * theta_dot
                 - self.kpr * (wheel_angle - self.wheel_ref) - self.kdr * (wheel_rate - self.rate_ref))
 

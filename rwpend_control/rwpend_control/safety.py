@@ -98,6 +98,22 @@ class StateWatchdog:
         """(accepted, note) for a state with ``seq`` (and ``stamp``, s, same clock as ``now``)
         arriving at ``now``.  Refused: note says why.  Accepted: note is non-empty when the
         stream recovers from stale or restarts."""
+        last_time = self.last_time
+        if (last_time is not None and not self.stale and seq > self.last_seq
+                and now - last_time <= self.timeout and now >= self.last_arrival - self.timeout):
+            # the next state of a live stream (every sample's path): what _admit_general does
+            # when the seq is newer, there was no silence and the clock did not go back
+            self.resumed_after = 0.0
+            self.last_seq = int(seq)
+            self.last_arrival = float(now)
+            lead = stamp - now if stamp is not None else 0.0
+            self.last_time = float(stamp) if 0.0 < lead <= MAX_STAMP_LEAD else float(now)
+            return True, ''
+        return self._admit_general(seq, now, stamp)
+
+    def _admit_general(self, seq: int, now: float, stamp: float | None) -> tuple[bool, str]:
+        """:meth:`admit` in every case (admit's first branch is this for the next state of a
+        live stream)."""
         note = ''
         gap = self.silence(now)
         back = self.last_arrival is not None and now < self.last_arrival - self.timeout   # clock reset

@@ -128,7 +128,8 @@ class SwitchEvent:
 
 @dataclass
 class Status:
-    """What the controller did on the last sample (fields of ControllerStatus)."""
+    """What the controller did on the last sample (fields of ControllerStatus).
+    :meth:`Controller.update` gives the fields by position: a new field goes last."""
 
     t: float = 0.0
     seq: int = 0
@@ -267,6 +268,19 @@ def config_with(cfg: ControllerConfig, values: Mapping[str, Any]) -> ControllerC
             v = float(v)
         changes[row.field] = v
     return replace(cfg, **changes)
+
+
+def plausible_state(theta, theta_dot, wheel_angle, wheel_rate, friction, max_wheel_rate: float) -> bool:
+    """True when :meth:`Controller._bad_state` finds nothing wrong with these fields, by the
+    test every sample passes: each a float (not an int, a bool or anything else) within its
+    limit -- the chained comparisons are False for nan and +-inf, as the general checks refuse
+    them.  False: not decided here (an int field is sane), :meth:`Controller._bad_state` says."""
+    return (type(theta) is float and type(theta_dot) is float and type(wheel_angle) is float
+            and type(wheel_rate) is float and type(friction) is float
+            and -MAX_ANGLE <= theta <= MAX_ANGLE and -MAX_ANGLE <= wheel_angle <= MAX_ANGLE
+            and -MAX_THETA_DOT <= theta_dot <= MAX_THETA_DOT
+            and -max_wheel_rate <= wheel_rate <= max_wheel_rate
+            and -MAX_FRICTION <= friction <= MAX_FRICTION)
 
 
 class Controller:
@@ -487,6 +501,8 @@ class Controller:
 
     # ------------------------------------------------------------------ per sample
     def _bad_state(self, theta, theta_dot, wheel_angle, wheel_rate, friction) -> str:
+        """Why the state is refused ('' when it is sane): a field not a finite number, an angle
+        beyond MAX_ANGLE, a rate or the friction beyond its limit."""
         for name, v in (('theta', theta), ('theta_dot', theta_dot), ('wheel_angle', wheel_angle),
                         ('wheel_rate', wheel_rate), ('friction', friction)):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
@@ -620,7 +636,10 @@ class Controller:
         the mode afresh, as does a stream that resumes after stale (module doc)."""
         now = t if now is None else now
         # a bad state is answered with u = 0 but is no fresh state for the watchdog
-        fault = self._bad_state(theta, theta_dot, wheel_angle, wheel_rate, friction)
+        if plausible_state(theta, theta_dot, wheel_angle, wheel_rate, friction, self.max_wheel_rate):
+            fault = ''
+        else:
+            fault = self._bad_state(theta, theta_dot, wheel_angle, wheel_rate, friction)
         fault_code = FAULT_BAD_STATE if fault else FAULT_NONE
         note = ''
         if not fault:
@@ -636,14 +655,19 @@ class Controller:
             x = upright_deviation(theta)
             self._last_x = x
             self._friction_in = friction
-            fresh = self._fresh_reason(note, resyncs)
+            # (_fresh_reason is '' without a note and a change of resyncs: the path of every sample)
+            fresh = self._fresh_reason(note, resyncs) if note or resyncs != self._resyncs else ''
             if fresh:
                 self._fresh_start(t, x, theta_dot, fresh)
-            self._check_wheel_speed(t, theta_dot, wheel_rate)
+            limit = self.config.wheel_speed_limit        # (_check_wheel_speed does nothing within it)
+            if not -limit <= wheel_rate - theta_dot <= limit:
+                self._check_wheel_speed(t, theta_dot, wheel_rate)
             u_law = self._law_output(t, x, theta, theta_dot, wheel_angle, wheel_rate)
             if self.mode != 'off':
                 fc = self._friction(theta_dot, wheel_rate, friction)
-            if self._check_saturation(t, abs(u_law + fc) > self.u_max, x):
+            # (_check_saturation only clears _sat_since outside balance: the path of every sample)
+            if (self.mode == 'balance' or self._sat_since is not None) and \
+                    self._check_saturation(t, abs(u_law + fc) > self.u_max, x):
                 u_law = self._law_output(t, x, theta, theta_dot, wheel_angle, wheel_rate)
                 fc = self._friction(theta_dot, wheel_rate, friction) if self.mode != 'off' else 0.0
         u_uns = u_law + fc
@@ -652,12 +676,9 @@ class Controller:
         ev, self._pending = self._pending, None
         if self._law_fault:
             fault, fault_code, self._law_fault = self._law_fault, FAULT_LAW, ''
-        # (built here, not by _status: the path of every sample)
-        status = Status(t=t, seq=seq, mode=self.mode, law=self.law, u=u, u_unsaturated=u_uns,
-                        friction_compensation=fc, saturated=abs(u_uns) > umax,
-                        last_switch=self.last_switch, switch_count=self.switch_count,
-                        reason=self.reason, fault=fault, switch_code=self.switch_code,
-                        fault_code=fault_code, event=ev, note=note)
+        # (built here, not by _status, its fields by position in Status's order: every sample)
+        status = Status(t, seq, self.mode, self.law, u, u_uns, fc, abs(u_uns) > umax, self.last_switch,
+                        self.switch_count, self.reason, fault, self.switch_code, fault_code, ev, True, note)
         return u, status
 
     def _status(self, t: float, seq: int, **kw: Any) -> Status:
