@@ -427,7 +427,33 @@ class Estimator:
         Raises ValueError and changes nothing when the input is invalid; CountJumpError
         (refused) and DuplicateSampleError (ignored) change only the counters.
         """
-        pc, mc, u, seq = self._checked(pendulum_counts, motor_counts, u, seq)
+        pc, mc = pendulum_counts, motor_counts
+        if not (type(pc) is int and type(mc) is int and type(u) is float and type(seq) is int):
+            pc, mc, u, seq = self._checked(pc, mc, u, seq)
+        elif not (seq >= 0 and -math.inf < u < math.inf):
+            pc, mc, u, seq = self._checked(pc, mc, u, seq)      # raises ValueError
+        nxt = None if self._rates_unknown else self._track.take_next(seq, pc, mc)
+        if nxt is None:
+            return self._step_judged(pc, mc, u, seq)
+        # the next sample, plausible, the rates known (every sample's path): what
+        # _step_judged does with judge's verdict TAKE of gap 1
+        self._np += nxt[0]
+        self._nm += nxt[1]
+        dl = self._delta
+        y = self._theta0 + self._np * dl
+        yr = self._wheel0 + (self._np + self._nm) * dl
+        if self.config.command_timeout_samples < 1:
+            u = 0.0                  # as _bridge: the plant held the command for 0 samples
+        self._wd, self._wrd, self._f = self._update(y, yr, u)
+        self._y, self._yr = y, yr
+        est = Estimate(y, self._wd, yr, self._wrd, self._f,
+                       1.0 - math.cos(y) + 0.5 * self._wd * self._wd / self._a,
+                       self._track.stats.resyncs, 0)
+        self.last = est
+        return est
+
+    def _step_judged(self, pc: int, mc: int, u: float, seq: int | None) -> Estimate:
+        """:meth:`step` for checked inputs, whatever :meth:`GapTracker.judge` says of them."""
         kind, dp, dm, gap, missed, absolute, reason = self._track.judge(seq, pc, mc)
         if kind == REFUSE:
             raise CountJumpError(f'{reason} (max_rate = {self.config.max_rate:g} rad/s)')
@@ -701,16 +727,24 @@ class NonlinearEstimator(Observer3Estimator):
 
     def _update(self, y, yr, u):
         h = self.h
-        f_hat = self._input_friction(-self._x3 / self._br)   # F_hat(t_{k-1})
+        s = self._source
+        f_obs = -self._x3 / self._br
+        f_hat = f_obs if s == 'observer' else self._input_friction(f_obs)   # F_hat(t_{k-1})
         yp = self._y
         e = yp - self._p1
         p2 = self._wd
         self._p1 += h * (p2 + self.kp1 * e)
         p2 += h * (-self._a * math.sin(yp) - self._bp * (u - f_hat) + self.kp2 * e)
-        wrd, f_obs = self._wheel(u)
-        if self._source == 'observer':
+        # (3.11): _wheel(u) written out (every sample's path)
+        e = self._yr - self._x1
+        wrd, x3 = self._wrd, self._x3
+        self._x1 += h * (wrd + self.k1 * e)
+        wrd += h * (x3 + self._br * u + self.k2 * e)
+        self._x3 = x3 + h * self.k3 * e
+        f_obs = -self._x3 / self._br
+        if s == 'observer':
             f = f_obs
-        elif self._source == 'model':
+        elif s == 'model':
             f = self._friction_model(wrd - p2)
         else:
             f = 0.0

@@ -132,6 +132,23 @@ class GapTracker:
         return self._ref
 
     # ------------------------------------------------------------------ the verdict
+    def take_next(self, seq: int, pc: int, mc: int) -> tuple[int, int] | None:
+        """:meth:`judge` for the sample right after the reference (seq one newer, no refused
+        sample pending) when it is plausible -- every sample's case: its verdict TAKE as
+        (dp, dm), with judge's bookkeeping, without the Verdict.  None: another case, nothing
+        changed (ask :meth:`judge`)."""
+        ref = self._ref
+        if ref is None or seq is None or ref[0] is None or seq != ref[0] + 1 or self._refused:
+            return None
+        dp = ((pc - ref[1] + _TWO31) % _TWO32) - _TWO31
+        dm = ((mc - ref[2] + _TWO31) % _TWO32) - _TWO31
+        limit = self.max_step              # gap 1: judge's limit 1 * max_step is max_step
+        if not (-limit <= dp <= limit and -limit <= dm <= limit):
+            return None
+        self._newest = self._ref = (seq, pc, mc)
+        self.stats.taken += 1
+        return dp, dm
+
     def judge(self, seq: int | None, pc: int, mc: int) -> Verdict:
         """The verdict for a sample (ints; seq >= 0 or None) -- and its bookkeeping."""
         sample = (seq, pc, mc)
