@@ -231,7 +231,9 @@ class Plant:
         4 calls of _deriv, 5 tuples and ~40 attribute look-ups per sub-step (the integrator's
         hot path: 5 sub-steps a sample at h = 1 ms).  The products of constants (0.5 dt, dt/6
         ...) are those the plain form computes first (a * b * c is (a * b) * c).  Each stage:
-        the back-EMF cut-off (2.13), the friction (3.17) at w_rel, then (2.15)."""
+        the back-EMF cut-off (2.13), the friction (3.17) at w_rel, then (2.15).  (Bit for bit
+        too: tau0 - u computed once, 2.0 * a for 2 * a (the int is converted exactly), the
+        cut-off's comparisons in another order, none with a side effect.)"""
         if self.bracket:
             return self._free_run_plain
         sin = math.sin
@@ -245,31 +247,32 @@ class Plant:
 
         def run(th, thd, thr, thrd, tau0, u, n):
             for j in range(1, n + 1):
-                tau_mid = u + (tau0 - u) * half_decay
-                tau1 = u + (tau0 - u) * decay
+                d = tau0 - u
+                tau_mid = u + d * half_decay
+                tau1 = u + d * decay
                 w0 = w = thrd - thd
-                g = ((0.0 if emf and ((tau0 > 0.0 and w > wmax) or (tau0 < 0.0 and w < nwmax)) else tau0)
+                g = ((0.0 if emf and ((w > wmax and tau0 > 0.0) or (w < nwmax and tau0 < 0.0)) else tau0)
                      - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
                 a1, r1 = na * sin(th) + push - cp * thd - bp * g, br * g
                 x, v, wr = th + hdt * thd, thd + hdt * a1, thrd + hdt * r1
                 w = wr - v
-                g = ((0.0 if emf and ((tau_mid > 0.0 and w > wmax) or (tau_mid < 0.0 and w < nwmax)) else tau_mid)
+                g = ((0.0 if emf and ((w > wmax and tau_mid > 0.0) or (w < nwmax and tau_mid < 0.0)) else tau_mid)
                      - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
                 a2, r2 = na * sin(x) + push - cp * v - bp * g, br * g
                 x, v, wr = x + qdt2 * a1, thd + hdt * a2, thrd + hdt * r2
                 w = wr - v
-                g = ((0.0 if emf and ((tau_mid > 0.0 and w > wmax) or (tau_mid < 0.0 and w < nwmax)) else tau_mid)
+                g = ((0.0 if emf and ((w > wmax and tau_mid > 0.0) or (w < nwmax and tau_mid < 0.0)) else tau_mid)
                      - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
                 a3, r3 = na * sin(x) + push - cp * v - bp * g, br * g
                 x, v, wr = th + dt * thd + hdt2 * a2, thd + dt * a3, thrd + dt * r3
                 w = wr - v
-                g = ((0.0 if emf and ((tau1 > 0.0 and w > wmax) or (tau1 < 0.0 and w < nwmax)) else tau1)
+                g = ((0.0 if emf and ((w > wmax and tau1 > 0.0) or (w < nwmax and tau1 < 0.0)) else tau1)
                      - ((cpos + vpos * w if w > 0.0 else (ncneg + vneg * w if w < 0.0 else 0.0)) if fr else 0.0))
                 a4, r4 = na * sin(x) + push - cp * v - bp * g, br * g
                 th, thd, thr, thrd = (th + dt * (thd + dt6 * (a1 + a2 + a3)),
-                                      thd + dt6 * (a1 + 2 * a2 + 2 * a3 + a4),
+                                      thd + dt6 * (a1 + 2.0 * a2 + 2.0 * a3 + a4),
                                       thr + dt * (thrd + dt6 * (r1 + r2 + r3)),
-                                      thrd + dt6 * (r1 + 2 * r2 + 2 * r3 + r4))
+                                      thrd + dt6 * (r1 + 2.0 * r2 + 2.0 * r3 + r4))
                 tau0 = tau1
                 w = thrd - thd
                 if fr and (w0 == 0.0 or w == 0.0 or (w0 > 0.0) != (w > 0.0)):
@@ -300,7 +303,13 @@ class Plant:
         """Advance one sample period h with the command u held (ZOH): sub-steps of RK4 stuck
         (:meth:`_stuck_substep`) or free (:meth:`_free_run`), switching between them at the
         sub-step boundaries (stick/slip events)."""
-        u = self.quantize_command(u)
+        umax, q = self._umax, self._pwm_q
+        if type(u) is float and -umax <= u <= umax:
+            # quantize_command of a command within the limits written out (every sample's path)
+            if q:
+                u = math.floor(u / q + 0.5) * q
+        else:
+            u = self.quantize_command(u)
         self.u_held = u
         if self.rotor_locked:
             self._step_locked(u)
@@ -319,7 +328,8 @@ class Plant:
                 th, thd, thr, thrd, tau0 = self._stuck_substep(th, thd, thr, tau0, u)
                 k += 1
                 continue
-            th, thd, thr, thrd, tau0, done, crossed = self._free_motion()(th, thd, thr, thrd, tau0, u, n - k)
+            free = self._free if self._free_for is self.disturbance else self._free_motion()
+            th, thd, thr, thrd, tau0, done, crossed = free(th, thd, thr, thrd, tau0, u, n - k)
             k += done
             # relative speed crossed zero: stick if the bearing can hold the rotor
             if crossed and abs(self._required_friction(th, thd, tau0)) <= fb:
@@ -368,6 +378,15 @@ class Plant:
         torque, friction, stuck), without the object (the simulator reads them every sample)."""
         th, thd, thr, thrd = self._x
         return th, thd, thr, thrd, self._torque_available(self._tau, thrd - thd), self._friction, self._stuck
+
+    def readout(self) -> tuple[int, int, float, float, float, float, float, float, bool]:
+        """:meth:`counts` and :meth:`state_values` in one tuple (pendulum_counts, motor_counts,
+        theta, theta_dot, wheel_angle, wheel_rate, torque, friction, stuck): what the simulator
+        reads every sample, in one call."""
+        th, thd, thr, thrd = self._x
+        dl = self._delta
+        return (math.floor(th / dl + 0.5), math.floor((thr - th) / dl + 0.5), th, thd, thr, thrd,
+                self._torque_available(self._tau, thrd - thd), self._friction, self._stuck)
 
     def counts(self) -> tuple[int, int]:
         """Encoder readings (pendulum_counts, motor_counts) (2.1)-(2.2), rounded to a count."""

@@ -53,6 +53,7 @@ class SimCore:
         self.rig = rig
         self.plant = Plant(rig, **plant_kwargs)
         self.timeout_samples = int(command_timeout_samples)
+        self._umax = rig.u_max
         self.k = 0                       # seq of the next sample to publish
         self.u = 0.0                     # latest accepted command (before saturation)
         self.u_seq = -1                  # seq that the latest accepted command answered
@@ -99,6 +100,19 @@ class SimCore:
     # ------------------------------------------------------------- inputs
     def command(self, seq: int, u: float) -> tuple[bool, str]:
         """Offer a MotorCommand; returns (accepted, reason when refused)."""
+        if type(u) is float and type(seq) is int and self.u_seq < seq == self.k and -self._umax <= u <= self._umax:
+            # the command answering the newest sample, within |u| <= u_max (every sample's path
+            # in lockstep): what _command_checked accepts, as it stores it (float, int: the same)
+            self.u = u
+            self.u_seq = seq
+            self.last_command_k = seq
+            self.counters.commands += 1
+            return True, ''
+        return self._command_checked(seq, u)
+
+    def _command_checked(self, seq: int, u: float) -> tuple[bool, str]:
+        """:meth:`command` in every case (its first branch is this for a command answering the
+        newest sample within |u| <= u_max)."""
         c = self.counters
         if not isinstance(u, (int, float)) or not math.isfinite(u):
             c.rejected_commands += 1
@@ -252,13 +266,14 @@ class SimHardware:
         return self.core.k
 
     def read(self) -> Reading:
+        """Sample k: the core's :meth:`SimCore.sample` and the plant's truth (one call of
+        :meth:`Plant.readout` for both)."""
         core = self.core
-        seq, pc, mc = core.sample()
         plant = core.plant
-        th, thd, thr, thrd, torque, friction, stuck = plant.state_values()
+        pc, mc, th, thd, thr, thrd, torque, friction, stuck = plant.readout()
         truth = Truth(th, thd, thr, thrd, plant.u_held, torque, friction, plant.disturbance, bool(stuck),
                       bool(core.timed_out), core.held_seq)
-        return Reading(seq, pc, mc, self._u_prev, truth)
+        return Reading(core.k, pc, mc, self._u_prev, truth)
 
     def write(self, seq: int, u: float) -> tuple[bool, str]:
         return self.core.command(seq, u)
