@@ -73,7 +73,7 @@ class ControllerStage:
         ctrl = self.ctrl
         try:
             u, st = ctrl.update(t, seq, e.theta, e.theta_dot, e.wheel_angle, e.wheel_rate, e.friction,
-                                now=now, resyncs=e.resyncs)
+                                now, e.resyncs)
         except Exception as exc:  # noqa: BLE001 - a fault in a law: zero torque, reported
             self.law_errors += 1
             u, st = 0.0, ctrl.internal_error(t, seq, exc)
@@ -82,9 +82,10 @@ class ControllerStage:
         return u, st
 
 
-@dataclass
+@dataclass(slots=True)
 class Tick:
-    """What one sample produced, for the nodes to publish after the write."""
+    """What one sample produced, for the nodes to publish after the write (made every sample:
+    slots, and :meth:`Loop.step` gives the fields by position)."""
 
     reading: Reading
     t: float
@@ -121,31 +122,27 @@ class Loop:
         wall time for the controller's watchdog (None: the sample time); ``t``: the sample's
         time (s; None: seq h)."""
         if not self._advanced:
-            self.gate.interval(late=False)
+            self.gate.interval(False)
         self._advanced = False
         r = self.hardware.read()
         if t is None:
             t = r.seq * self.h
-        tick = Tick(r, t)
         if self.estimator is None:
-            return tick
+            return Tick(r, t)
         e = self.estimator.estimate(r.seq, r.pendulum_counts, r.motor_counts, r.u_prev)
-        tick.estimate = e
         if self.controller is None or e is None:
-            return tick
+            return Tick(r, t, e)
         u, st = self.controller.control(t, r.seq, e, t if now is None else now)
-        tick.status = st
         if not st.answer:
-            return tick
-        tick.u = u
-        if behind is not None and behind():
-            tick.late = True
+            return Tick(r, t, e, None, st)
+        late = False if behind is None else bool(behind())
+        if late:
             self.late += 1
-            self.gate.interval(late=True)
+            self.gate.interval(True)
             self._advanced = True
-        tick.taken = self.gate.offer(self.controller.controller_id, r.seq, u)
+        taken = self.gate.offer(self.controller.controller_id, r.seq, u)
         self.samples += 1
-        return tick
+        return Tick(r, t, e, u, st, taken, late)
 
     def finish_interval(self, late: bool = False) -> None:
         """Integrate the interval after the newest sample (the end of a run, or a loop that

@@ -92,6 +92,18 @@ class CommandClaim:
         self.intruder_k = k
         return False
 
+    def holder_alive(self, source: int, k: int) -> bool:
+        """:meth:`admit`'s first step for a command that does not release, without the call of
+        ``take``: True when ``source`` holds the rig -- then, as :meth:`admit` does, the holder
+        is alive at ``k`` and :attr:`event` is None, and the caller offers the command to the
+        plant (what :meth:`admit` would return is whether the plant takes it); False: nothing
+        changed, :meth:`admit` decides."""
+        if source != self.holder:
+            return False
+        self.event = None
+        self.last_k = k
+        return True
+
     def intruding(self, k: int, within: int) -> bool:
         """A command of another controller was refused within the last ``within`` samples
         before plant sample ``k``."""

@@ -32,6 +32,18 @@ class CommandGate:
     def offer(self, source: int, seq: int, u: float, release: bool = False) -> bool:
         """The command of controller ``source``; True when the hardware took it. :attr:`claim`
         ``.event`` says what changed in the claim (a release zeroes the motor now)."""
+        hw = self.hardware
+        if not release and self.claim.holder_alive(source, hw.k):
+            # the holder's command (every sample's path): what admit gives it, without the closure
+            taken, self.last_reason = hw.write(seq, u)
+            if taken:
+                self.event = self.health.command() or self.event
+            return taken
+        return self._offer_claimed(source, seq, u, release)
+
+    def _offer_claimed(self, source: int, seq: int, u: float, release: bool) -> bool:
+        """:meth:`offer` in every case, through :meth:`CommandClaim.admit` (offer's first branch
+        is this for the holder's command)."""
         reason = ['']
 
         def take() -> bool:

@@ -66,6 +66,18 @@ class LoopHealth:
         the command timeout holds the motor at zero over it."""
         if not self.commands:
             return None            # no loop yet: a plant alone, or still starting
+        if self.checked and not timed_out:
+            # after the first window, a sample with a fresh command (every sample's path): what
+            # _sample_general does then
+            self.samples += 1
+            self.late += bool(late)
+            self.timeout_run = 0
+            return None
+        return self._sample_general(late, timed_out)
+
+    def _sample_general(self, late: bool, timed_out: bool) -> str | None:
+        """:meth:`sample` in every case once a command has come (sample's first branch is this
+        after the first window, without the command timeout)."""
         self.samples += 1
         self.late += bool(late)
         event = None

@@ -162,7 +162,7 @@ def simulate(setup: RunSetup, trace: bool = False):
         finish()
         if plant.t >= end:                    # the simulator's done()
             break
-        tick = step(t=k * period_ns * 1e-9)
+        tick = step(None, None, k * period_ns * 1e-9)       # t: the sample's time
         tr = tick.reading.truth
         th_(tr.theta)
         thd_(tr.theta_dot)
