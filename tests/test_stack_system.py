@@ -166,14 +166,14 @@ def test_offline_reestimation_matches_live(lockstep_bags, tmp_path, ros_env):
     try:
         # the player waits for the estimator (--wait), not for the recorder behind it: start once
         # the recorder has subscribed to the estimator's state (a lockstep bag plays at its sim
-        # time, 1 ms per sample: x 0.5 that is 20 s for this bag)
+        # time, 1 ms per sample: 10 s for this bag, the estimator's own rate live)
         end = time.monotonic() + 60
         while 'recording /offline/state' not in (tmp_path / 'nodes.log').read_text():
             assert time.monotonic() < end and rec.poll() is None and est.poll() is None, \
                 (tmp_path / 'nodes.log').read_text()[-3000:]
             time.sleep(0.1)
         run(['play', str(bag), '--topics', '/rwpend/encoders', '/rwpend/command', '--start', '0',
-             '--rate', '0.5', '--remap', '/rwpend/encoders:=/offline/encoders',
+             '--rate', '1.0', '--remap', '/rwpend/encoders:=/offline/encoders',
              '--remap', '/rwpend/command:=/offline/command', '--wait', '10'], ros_env, timeout=120)
         time.sleep(1.0)
     finally:
@@ -203,8 +203,7 @@ def test_live_tools_against_a_running_stack(ros_env):
         # invalid values are refused with the reason, and change nothing
         p = run(['param', 'set', 'controller', 'balance.kpp', '.nan'], ros_env, check=False)
         assert p.returncode == 1 and 'out of range' in p.stderr and 'nan' in p.stderr
-        p = run(['param', 'set', 'controller', 'balance.kpp', '50.0'], ros_env, check=False)
-        assert p.returncode == 1 and 'unstable' in p.stderr
+        # (an unstable set refused by the param tool: test_control_system's live gain change)
         p = run(['param', 'set', 'controller', 'mode', 'bogus'], ros_env, check=False)
         assert p.returncode == 1 and 'mode' in p.stderr
         assert f'balance.kpp: {kpp!r}' in run(['param', 'get', 'controller', 'balance.kpp'], ros_env).stdout
@@ -219,8 +218,7 @@ def test_live_tools_against_a_running_stack(ros_env):
         assert run(['tap', '500'], ros_env, check=False).returncode == 1
         assert 'raised' in run(['estop'], ros_env).stdout
         assert 'cleared' in run(['estop', '--clear'], ros_env).stdout
-        dump = run(['param', 'dump', 'controller'], ros_env).stdout
-        assert dump.startswith('/rwpend/controller:') and 'ros__parameters' in dump
+        # (param dump and load: test_param_services_system.test_rwpend_param_behaves_the_same_way)
     finally:
         stack.send_signal(2)
         stack.wait(timeout=30)
