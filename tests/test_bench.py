@@ -15,8 +15,8 @@ RWPEND = str(ROOT / 'rwpend')
 @pytest.mark.timeout(150)
 def test_bench_runs_and_writes_json(tmp_path, ros_env):
     out = tmp_path / 'bench'
-    p = subprocess.run([RWPEND, 'bench', '--duration', '2', '--lockstep-duration', '1', '--h', '0.001',
-                        '--layout', 'separate', '--scale-max', '1', '--scale-duration', '2', '-o', str(out)],
+    p = subprocess.run([RWPEND, 'bench', '--duration', '1', '--lockstep-duration', '1', '--h', '0.001',
+                        '--layout', 'separate', '--scale-max', '1', '--scale-duration', '1', '-o', str(out)],
                        env=ros_env, capture_output=True,
                        text=True, timeout=140)
     assert p.returncode == 0, f'{p.stdout[-3000:]}\n{p.stderr[-3000:]}'

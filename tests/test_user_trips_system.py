@@ -95,7 +95,7 @@ def test_estop_from_a_volatile_publisher_and_no_torque_after_the_clear_until_a_m
         time.sleep(2.0)
         refused = rwpend(['mode', 'auto'], ros_env, check=False)
         wait_for(log, 'set_mode auto', stack, 20)
-        time.sleep(3.0)
+        time.sleep(1.0)         # lockstep: > 0.1 s of simulated time driven by the new mode
     finally:
         out = stop(stack, log)
     assert refused.returncode == 0, refused.stdout + refused.stderr
