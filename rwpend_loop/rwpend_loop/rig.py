@@ -17,55 +17,9 @@ simulator (:mod:`rwpend_loop.host`): the sample path's bytes as published, the r
 """
 from __future__ import annotations
 
-import contextlib
-import os
 from typing import Optional
 
 from rwpend_sim.sim_core import Reading
-
-
-@contextlib.contextmanager
-def ordinary_scheduling():
-    """The calling thread at ordinary scheduling (SCHED_OTHER) meanwhile, its policy back after.
-
-    The bag writer's child process (rwpend_bag.procwriter) inherits the policy of the thread
-    that starts it, and runs SCHED_FIFO below a real-time loop. On the rig that starves the
-    serial port: every byte of a tty (a pty, a USB serial port) reaches its reader through the
-    kernel's ``flush_to_ldisc`` work, run by an ordinary-priority kworker, which waits while a
-    SCHED_FIFO thread holds its CPU -- the writer's ~800 bursts a second of 0.1-0.7 ms were 43 %
-    of the time the SAMPLE and COMMAND bytes waited > 0.3 ms for their kworker (ftrace,
-    PERFORMANCE.md "What each mechanism buys"). At ordinary priority the kworker takes the CPU
-    from it; the writer's queue absorbs the wait. Threads of this process started meanwhile (the
-    writer's sender) get the policy back too: only the child runs at ordinary priority."""
-    try:
-        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-    except (AttributeError, OSError):
-        yield
-        return
-    changed = False
-    before = _threads()
-    if policy != os.SCHED_OTHER:
-        try:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-            changed = True
-        except OSError:
-            pass
-    try:
-        yield
-    finally:
-        if changed:
-            for tid in [0, *(_threads() - before)]:
-                try:
-                    os.sched_setscheduler(tid, policy, param)
-                except OSError:
-                    pass
-
-
-def _threads() -> set[int]:
-    try:
-        return {int(t) for t in os.listdir('/proc/self/task')}
-    except OSError:
-        return set()
 
 
 class LinkReading:
@@ -126,9 +80,8 @@ class RigHost:
         self.recorder = None
         if record:
             from rwpend_bag.recorder_node import Recorder
-            with ordinary_scheduling():     # the bag writer's child inherits it (below)
-                self.recorder = Recorder(record, None, True, direct=tap_publishers(taps, self._put),
-                                         writer_process=True)
+            self.recorder = Recorder(record, None, True, direct=tap_publishers(taps, self._put),
+                                     writer_process=True)
             self.nodes.append(self.recorder)
         else:
             tap_publishers(taps, None)
