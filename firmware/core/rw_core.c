@@ -1,7 +1,7 @@
 /*
  * The device core: PROTOCOL.md "Device behaviour (firmware contract)". See rw_core.h.
  *
- * The PC side's rwpend_driver/device.py states the same contract in Python; the host tests
+ * The tests' tests/support/device.py states the same contract in Python; the host tests
  * (rwpend_driver/test/test_firmware.py) run both on the same input and compare every frame.
  */
 #include "rw_core.h"

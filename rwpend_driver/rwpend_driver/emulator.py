@@ -1,17 +1,15 @@
 """Device emulator: the rig's microcontroller on a pseudo-terminal, driving the plant model in real time.
 
     ./rwpend emulate [--link PATH] [--h S] [--watchdog-ms N] [--theta RAD] [--rig FILE] [--hand] [--json]
-                     [--status-period S] [--core firmware|python]
+                     [--status-period S] [--rt-priority N]
 
 Opens a pty (os.openpty), prints the slave device path (and makes PATH a symlink to it with
 ``--link``), then every h sends one SAMPLE frame and applies the latest valid COMMAND with
-zero-order hold.  The device logic is the rig's firmware itself (``--core firmware``, the
-default): the portable core of ``firmware/core`` (C99, the code the STM32 board runs) built for
-this PC and called through ctypes (:mod:`rwpend_driver.firmware`); this module is its HAL -- the
-pty its UART, the plant model (:class:`rwpend_model.plant.Plant`) its motor and encoders, the
-sample clock this loop.  ``--core python`` runs the Python statement of the same contract
-(:mod:`rwpend_driver.device`) instead.  The ready, status and exit lines name the core
-(``fw``: the firmware's version, or ``python``).
+zero-order hold.  The device logic is the rig's firmware itself: the portable core of
+``firmware/core`` (C99, the code the STM32 board runs) built for this PC and called through
+ctypes (:mod:`rwpend_driver.firmware`); this module is its HAL -- the pty its UART, the plant
+model (:class:`rwpend_model.plant.Plant`) its motor and encoders, the sample clock this loop.
+The ready, status and exit lines name the firmware's version (``fw``).
 
 Signals emulate the cable: SIGUSR1 = unplug (the pty is closed, the link removed; the device
 keeps running, so its watchdog zeroes the motor), SIGUSR2 = replug (a new pty, the link
@@ -55,7 +53,6 @@ from rwpend_model.rig import load_rig, load_rig_file
 from rwpend_ros.trace import tracer
 
 from . import protocol as P
-from .device import DEFAULT_WATCHDOG_MS, DeviceCore
 from .firmware import FirmwareCore, FirmwareError
 from .link_health import Histogram
 
@@ -113,14 +110,10 @@ class Pty:
             pass
 
 
-#: the device logics the emulator can run (``--core``)
-CORES = ('firmware', 'python')
-
-
 def parse_args(argv):
     ap = argparse.ArgumentParser(prog='rwpend emulate', description=__doc__.split('\n\n')[0])
     ap.add_argument('--link', help='create this symlink to the pty slave (replaced atomically)')
-    ap.add_argument('--watchdog-ms', type=int, default=DEFAULT_WATCHDOG_MS,
+    ap.add_argument('--watchdog-ms', type=int, default=P.DEFAULT_WATCHDOG_MS,
                     help=f'initial watchdog period, ms ({P.WATCHDOG_MIN_MS}..{P.WATCHDOG_MAX_MS}; '
                          'the host sets it with SET_WATCHDOG)')
     ap.add_argument('--theta', type=float, default=0.0, help='initial pendulum angle (rad from hanging)')
@@ -138,9 +131,6 @@ def parse_args(argv):
     ap.add_argument('--h', type=float, default=None, metavar='S',
                     help='sample period, s (default: rig.sample_period of the rig YAML); the stack '
                          'must run with the same one (./rwpend up --h S): the driver checks it')
-    ap.add_argument('--core', choices=CORES, default='firmware',
-                    help='the device logic: the firmware\'s C core built for this PC (firmware, the default) '
-                         'or its Python statement (python, rwpend_driver.device)')
     ap.add_argument('--rt-priority', type=int, default=0, metavar='N',
                     help='SCHED_FIFO priority N (1-99) for the emulated firmware, as for the real '
                          'rig\'s microcontroller; nice -10 where not permitted (default 0: '
@@ -213,14 +203,6 @@ class EmulatorCounters:
 SENT_RING = 4096
 
 
-def make_core(name: str, rig, plant: Plant, watchdog_ms: int, on_event):
-    """The device logic ``name`` (CORES) for ``rig``; the emulator steps ``plant`` between the core's
-    tick_begin and tick_end.  FirmwareError when the firmware's core cannot be built or loaded."""
-    if name == 'python':
-        return DeviceCore(rig, plant, watchdog_ms=watchdog_ms, now=0.0, on_event=on_event)
-    return FirmwareCore(rig, watchdog_ms=watchdog_ms, on_event=on_event)
-
-
 class Emulator:
     def __init__(self, args) -> None:
         self.args = args
@@ -228,7 +210,9 @@ class Emulator:
         self.rig = load_rig(args.rig, overrides=None if args.h is None else {'rig.sample_period': args.h})
         self.t0 = time.monotonic()
         self.plant = Plant(self.rig, theta=args.theta)      # the rig on the other side of the HAL
-        self.core = make_core(args.core, self.rig, self.plant, args.watchdog_ms, self.on_core_event)
+        # the firmware's core (FirmwareError when it cannot be built or loaded); the emulator steps the
+        # plant between its tick_begin and tick_end
+        self.core = FirmwareCore(self.rig, watchdog_ms=args.watchdog_ms, on_event=self.on_core_event)
         self.pty: Optional[Pty] = None
         self.host = False
         self.hands: queue.Queue = queue.Queue()
@@ -492,8 +476,7 @@ def main(argv=None) -> int:
     try:
         emu = Emulator(args)
     except FirmwareError as exc:
-        print(f'rwpend emulate: {exc} (--core python runs the Python statement of the device instead)',
-              file=sys.stderr)
+        print(f'rwpend emulate: {exc}', file=sys.stderr)
         return 2
 
     def on_stop(signum, frame):

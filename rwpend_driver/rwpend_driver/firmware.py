@@ -1,9 +1,7 @@
 """The rig's reference firmware (firmware/ at the top of the tree) built for this PC and bound
-with ctypes: the portable C core the board runs, for the host tests of its behaviour against the
-driver's own codec and :mod:`rwpend_driver.device` (rwpend_driver/test/test_firmware.py).
-
-The emulator (``./rwpend emulate``) still runs :mod:`rwpend_driver.device`, the same protocol in
-Python; running it on this core is where the firmware goes next (firmware/README.md).
+with ctypes: the portable C core the board runs.  The emulator (``./rwpend emulate``) runs it as
+the device, and the host tests (rwpend_driver/test/test_firmware.py) compare it with the driver's
+own codec and with the tests' Python statement of the device (tests/support/device.py).
 """
 from __future__ import annotations
 
@@ -20,7 +18,6 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from . import protocol as P
-from .device import DEFAULT_WATCHDOG_MS
 
 
 # ----------------------------------------------------------------------------- the firmware's core
@@ -179,7 +176,7 @@ class FirmwareCore:
     OUT_CAP = 16384
     CHUNK = 2048           # received bytes per call: their replies always fit OUT_CAP
 
-    def __init__(self, rig, *, watchdog_ms: int = DEFAULT_WATCHDOG_MS, serial: int = 0x52570001,
+    def __init__(self, rig, *, watchdog_ms: int = P.DEFAULT_WATCHDOG_MS, serial: int = 0x52570001,
                  on_event: Optional[Callable[[str, dict], None]] = None, lib: Optional[ctypes.CDLL] = None) -> None:
         self.lib = lib or load_library()
         h = rig.sample_period

@@ -64,6 +64,8 @@ NO_SAMPLE = 0xFFFFFFFF
 U_SCALE = 1000
 U_MILLI_LIMIT = 32767
 WATCHDOG_MIN_MS = 2
+#: the watchdog period at power-up (PROTOCOL.md, "Device behaviour"; firmware RW_WATCHDOG_POWER_UP_MS)
+DEFAULT_WATCHDOG_MS = 50
 WATCHDOG_MAX_MS = 1000
 #: SET_HOLD max_age range (samples; 0 = no limit, the power-up value)
 HOLD_MAX_SAMPLES = 1000

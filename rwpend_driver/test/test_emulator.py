@@ -7,6 +7,8 @@ import os
 import threading
 import time
 
+import pytest
+
 from rwpend_driver import protocol as P
 from rwpend_driver.emulator import Emulator, parse_args
 
@@ -97,14 +99,19 @@ def test_unplug_replug_by_request(tmp_path):
         stop(emu, th)
 
 
-def test_the_firmware_core_by_default_the_python_statement_on_request(tmp_path, capsys):
-    """``./rwpend emulate`` runs the firmware's C core (its version in the ready, status and exit
-    lines); ``--core python`` the Python statement.  Either samples the plant the hand moved."""
+def test_the_emulator_runs_the_firmware_core(tmp_path, capsys):
+    """``./rwpend emulate`` runs the firmware's C core: its version is in the ready, status and exit
+    lines, and it samples the plant the hand moved."""
     from rwpend_driver.firmware import firmware_version
-    for extra, fw in (([], firmware_version()), (['--core', 'python'], 'python 1.1.0')):
-        emu = Emulator(parse_args(['--json', '--duration', '0.05', '--status-period', '0.02', *extra]))
-        emu.hands.put('lift 20 1')
-        emu.run()
-        assert emu.core.counts() == emu.plant.counts() and emu.core.counts()[0] > 200
-        events = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-        assert {e['fw'] for e in events if e['event'] in ('ready', 'status', 'exit')} == {fw}
+    emu = Emulator(parse_args(['--json', '--duration', '0.05', '--status-period', '0.02']))
+    emu.hands.put('lift 20 1')
+    emu.run()
+    assert emu.core.counts() == emu.plant.counts() and emu.core.counts()[0] > 200
+    events = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert {e['fw'] for e in events if e['event'] in ('ready', 'status', 'exit')} == {firmware_version()}
+
+
+def test_the_device_logic_is_not_a_choice():
+    """The firmware's core is the only device logic the emulator has: no ``--core``."""
+    with pytest.raises(SystemExit):
+        parse_args(['--core', 'python'])

@@ -2,7 +2,7 @@
 STM32 board runs (rwpend_driver.firmware).
 
 * its frame codec against the driver's (rwpend_driver.protocol) on the same bytes;
-* its device logic against the Python statement of the contract (rwpend_driver.device) on the same
+* its device logic against the Python statement of the contract (tests/support/device.py) on the same
   random traffic, frame for frame;
 * watchdog, e-stop (ENABLE 0 held until ENABLE 1), the "too old" rule, counter wrap, bad frames
   (truncated, bad CRC, unknown type, oversized: counted, never acted on, never a crash);
@@ -26,7 +26,7 @@ import pytest
 
 from rwpend_driver import firmware as E
 from rwpend_driver import protocol as P
-from rwpend_driver.device import DeviceCore
+from support.device import DeviceCore
 from rwpend_model.plant import Plant
 from rwpend_model.rig import load_rig
 
@@ -184,7 +184,7 @@ def _random_traffic(rng: random.Random, k: int, frame_seq: int) -> bytes:
 @pytest.mark.parametrize('seed', [11, 12, 13])
 def test_the_c_core_does_what_the_python_statement_does(rig, seed):
     """Same random traffic and sample instants into the firmware's core and into
-    rwpend_driver.device.DeviceCore (each driving its own copy of the plant): every frame out is
+    support.device.DeviceCore (each driving its own copy of the plant): every frame out is
     the same, and so is every command the motor got. (OVERSPEED aside: Python takes it from the
     true speed, the firmware from the counter's change over a period; the wheel stays far below.)"""
     rng = random.Random(seed)

@@ -6,7 +6,7 @@ import random
 import pytest
 
 from rwpend_driver import protocol as P
-from rwpend_driver.device import DeviceCore
+from support.device import DeviceCore
 from rwpend_driver.link import DriverLink, FrameWriter, LinkConfig
 from rwpend_model.rig import load_rig
 

@@ -1,12 +1,12 @@
-"""Device-side logic of the rig's microcontroller: the reference implementation of the firmware.
+"""Device-side logic of the rig's microcontroller stated in Python: the tests' oracle of the firmware.
 
 :class:`DeviceCore` is pure (no I/O, no clock of its own): the caller feeds the received bytes
 with :meth:`DeviceCore.receive` and calls :meth:`DeviceCore.tick` once per sample period with
 the current time; both return the bytes to transmit (or :meth:`DeviceCore.tick_begin` and
 :meth:`DeviceCore.tick_end` around the plant's step, as the firmware's C core is called).  The C
-core (``firmware/core``) is what ``./rwpend emulate`` runs; this statement of it is the one its
-host tests compare with frame for frame, the PC side's tests' fake device, and
-``./rwpend emulate --core python``.
+core (``firmware/core``) is what ``./rwpend emulate`` and the board run; this statement of it
+is the one its host tests compare with frame for frame (``rwpend_driver/test/test_firmware.py``)
+and the PC side's tests' fake device (``test_link.py``, ``test_device.py``).
 
 Per tick (sample k -> k+1):
 1. watchdog: enabled and more than ``watchdog_period`` since the last valid COMMAND (or since
@@ -24,10 +24,9 @@ from typing import Callable, Optional
 from rwpend_model.plant import Plant
 from rwpend_model.rig import Rig
 
-from . import protocol as P
+from rwpend_driver import protocol as P
 
 FW_VERSION = (1, 1, 0)
-DEFAULT_WATCHDOG_MS = 50
 
 
 @dataclass
@@ -53,7 +52,7 @@ class DeviceCore:
     """State machine of the device: enable, watchdog, command hold, zeroing, framing."""
 
     def __init__(self, rig: Rig, plant: Optional[Plant] = None, *, serial: int = 0x52570001,
-                 watchdog_ms: int = DEFAULT_WATCHDOG_MS, now: float = 0.0,
+                 watchdog_ms: int = P.DEFAULT_WATCHDOG_MS, now: float = 0.0,
                  on_event: Optional[Callable[[str, dict], None]] = None) -> None:
         self.rig = rig
         self.plant = plant if plant is not None else Plant(rig)
