@@ -1,8 +1,10 @@
 """System tests of what a ROS user and a lab student trip over: an e-stop from any publisher (the
 volatile one ``ros2 topic pub`` makes), a cleared e-stop that leaves the rig at zero torque until
-a mode is chosen again, and ``~/reset`` refused while the loop drives the rig."""
+a mode is chosen again, and ``~/reset`` refused while the loop drives the rig -- both on one
+lockstep stack (:func:`one_stack`: balance first, then auto and the e-stop)."""
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import textwrap
@@ -11,7 +13,10 @@ import time
 import numpy as np
 import pytest
 
-from test_safety_system import RWPEND, UPRIGHT, deviation, rwpend, series, strings
+from rwpend_bag.analysis import _decode
+from rwpend_bag.reader import read_bag
+from rwpend_ros.testenv import test_domain_id
+from test_safety_system import RWPEND, UPRIGHT, deviation, rwpend
 
 #: publishes std_msgs/Bool on /rwpend/estop with rclpy's default QoS (reliable, volatile, depth
 #: 10), as ``ros2 topic pub --once /rwpend/estop std_msgs/msg/Bool "{data: true}"`` does
@@ -78,29 +83,88 @@ def stop(stack, log) -> str:
     return out
 
 
-@pytest.mark.system
-@pytest.mark.timeout(180)
-def test_estop_from_a_volatile_publisher_and_no_torque_after_the_clear_until_a_mode_is_set(tmp_path, ros_env):
-    stack, bag, log = start(tmp_path, ros_env, '--mode', 'auto')
+@pytest.fixture(scope='module')
+def one_stack(tmp_path_factory):
+    """One lockstep stack for both tests (one start and stop, not two): balance, where ``~/reset``
+    is refused; then auto (caught at once, upright), the e-stop from a volatile publisher, the
+    clear, and auto set again. (reset's answer, the e-stop scenario's mode call, what the bag holds
+    (:func:`recorded`),
+    the stack's output)."""
+    tmp_path = tmp_path_factory.mktemp('user_trips')
+    env = dict(os.environ, ROS_DOMAIN_ID=str(test_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               PYTHONUNBUFFERED='1')
+    env['RMW_IMPLEMENTATION'] = env.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    stack, bag, log = start(tmp_path, env, '--mode', 'balance')
     try:
+        # 1. ~/reset refused while balancing
+        wait_for(log, 'set_mode balance', stack)
+        time.sleep(1.5)
+        reset = rwpend(['exec', 'python', '-c', RESET], env)
+        time.sleep(1.0)
+        # 2. auto: upright, it catches at once; then the e-stop from a volatile publisher
+        rwpend(['mode', 'auto'], env)
         wait_for(log, 'auto/catch', stack)
         time.sleep(1.0)
-        p = rwpend(['exec', 'python', '-c', VOLATILE_ESTOP, 'true'], ros_env)
+        p = rwpend(['exec', 'python', '-c', VOLATILE_ESTOP, 'true'], env)
         assert 'matched' in p.stdout and 'NOT READY' not in p.stdout, p.stdout
         wait_for(log, 'E-STOP raised', stack, 20)
         wait_for(log, 'e-stop raised: off', stack, 20)      # the controller switched off
         time.sleep(1.0)
-        assert 'cleared' in rwpend(['estop', '--clear'], ros_env).stdout
+        assert 'cleared' in rwpend(['estop', '--clear'], env).stdout
         wait_for(log, 'e-stop cleared: off', stack, 20)
         time.sleep(2.0)
-        refused = rwpend(['mode', 'auto'], ros_env, check=False)
-        wait_for(log, 'set_mode auto', stack, 20)
+        refused = rwpend(['mode', 'auto'], env, check=False)
+        wait_for_count(log, 'set_mode auto', 2, stack, 20)
         time.sleep(1.0)         # lockstep: > 0.1 s of simulated time driven by the new mode
     finally:
         out = stop(stack, log)
+    return reset, refused, recorded(bag), out
+
+
+def recorded(bag_dir) -> dict:
+    """What the tests read of the bag, read once (the bag of the lockstep run is large): the
+    columns of the true state and of the estimate, and (log_ns, mode, reason) of every status."""
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+    status = '/rwpend/controller/status'
+    bag = read_bag(bag_dir, topics=['/rwpend/sim/true_state', '/rwpend/state', status])
+    t = bag.topics[status]
+    dec = DecoderFactory().decoder_for('cdr', Schema(id=1, name=t.type, encoding='ros2msg', data=t.schema.encode()))
+    return {'truth': _decode(bag, '/rwpend/sim/true_state'), 'state': _decode(bag, '/rwpend/state'),
+            'status': [(int(log_ns), m.mode, m.reason) for log_ns, m in
+                       ((log_ns, dec(d)) for log_ns, d in zip(t.log_ns(), t.datas))]}
+
+
+def wait_for_count(log, text: str, count: int, stack, within: float = 60.0) -> None:
+    """Until ``text`` is ``count`` times in the log."""
+    end = time.monotonic() + within
+    while log.read_text().count(text) < count:
+        assert stack.poll() is None and time.monotonic() < end, log.read_text()[-3000:]
+        time.sleep(0.1)
+
+
+@pytest.mark.system
+@pytest.mark.timeout(240)       # the shared stack is run in the first of the two tests
+def test_reset_is_refused_while_balancing(one_stack):
+    p, _, bag, _ = one_stack
+    assert 'success False' in p.stdout and 'reset refused: the loop is driving the rig' in p.stdout, p.stdout
+    status = bag['status']
+    # the balance part: until auto is set (the stack's second part)
+    auto = next(i for i, (_, _, reason) in enumerate(status) if reason == 'set_mode auto')
+    t_auto = status[auto][0]
+    state = bag['state']
+    balancing = state['_log_ns'] < t_auto
+    assert balancing.sum() > 1000, 'a second and more of balance before auto'
+    assert np.max(np.abs(deviation(state['theta'][balancing]))) < 0.1, 'the estimate kept the absolute angle: no jump'
+    assert all(mode == 'balance' for _, mode, _ in status[1:auto]), status[:5]
+
+
+@pytest.mark.system
+@pytest.mark.timeout(240)       # the shared stack, when this test runs alone
+def test_estop_from_a_volatile_publisher_and_no_torque_after_the_clear_until_a_mode_is_set(one_stack):
+    _, refused, bag, out = one_stack
     assert refused.returncode == 0, refused.stdout + refused.stderr
-    truth = series(bag, '/rwpend/sim/true_state')
-    status = strings(bag, '/rwpend/controller/status', ['mode', 'reason'])
+    truth, status = bag['truth'], bag['status']
     reasons = [reason for _, _, reason in status]
     raised = next(i for i, r in enumerate(reasons) if r.startswith('e-stop raised'))
     cleared = next(i for i, r in enumerate(reasons) if r.startswith('e-stop cleared'))
@@ -117,22 +181,3 @@ def test_estop_from_a_volatile_publisher_and_no_torque_after_the_clear_until_a_m
     # the mode chosen again drives the rig again
     assert np.any(truth['u_commanded'][log_ns > t[resumed] + 100_000_000] != 0.0)
     assert 'Traceback' not in out
-
-
-@pytest.mark.system
-@pytest.mark.timeout(180)
-def test_reset_is_refused_while_balancing(tmp_path, ros_env):
-    stack, bag, log = start(tmp_path, ros_env, '--mode', 'balance')
-    try:
-        wait_for(log, 'set_mode balance', stack)
-        time.sleep(1.5)
-        p = rwpend(['exec', 'python', '-c', RESET], ros_env)
-        time.sleep(1.0)
-    finally:
-        stop(stack, log)
-    assert 'success False' in p.stdout and 'reset refused: the loop is driving the rig' in p.stdout, p.stdout
-    state = series(bag, '/rwpend/state')
-    assert np.max(np.abs(deviation(state['theta']))) < 0.1, 'the estimate kept the absolute angle: no jump'
-    status = strings(bag, '/rwpend/controller/status', ['mode'])
-    assert all(mode == 'balance' for _, mode in status[1:]), status[:5]
-
