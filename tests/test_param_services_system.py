@@ -428,3 +428,48 @@ def test_rwpend_param_behaves_the_same_way(rig, tmp_path):
     p = run(['param', 'get', 'controller', 'no_such_parameter'], env, check=False)
     assert p.returncode == 1 and "no parameter 'no_such_parameter'" in p.stderr, p.stderr
     assert math.isfinite(kpp)
+
+
+def run_all(argss, env) -> list[subprocess.CompletedProcess]:
+    """``./rwpend ARGS`` for each of ``argss`` side by side (commands whose order does not matter:
+    each is its own process, most of whose time is Python's start and the wait for discovery)."""
+    procs = [subprocess.Popen([RWPEND, *args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for args in argss]
+    out = []
+    for args, p in zip(argss, procs):
+        stdout, stderr = p.communicate(timeout=120)
+        out.append(subprocess.CompletedProcess([RWPEND, *args], p.returncode, stdout, stderr))
+    return out
+
+
+@pytest.mark.timeout(300)
+def test_live_tools_against_a_running_stack(rig):
+    """./rwpend param / gains --apply / mode / tap / estop against the running stack (this
+    module's: the last of its tests, as it leaves the controller with other gains and off after
+    the e-stop): wrong values refused with the reason, a designed gain set applied as a whole,
+    balance refused while hanging, a tap out of range refused, the e-stop raised and cleared.
+    The refusals, which change nothing, are sent side by side."""
+    client, env = rig
+    p = run(['param', 'get', 'controller', 'mode', 'balance.kpp'], env)
+    assert 'mode: off' in p.stdout
+    kpp = float(p.stdout.split('balance.kpp:')[1].split()[0])
+    # invalid values are refused with the reason, and change nothing; balance refused while
+    # hanging; a tap out of range refused
+    nan, bogus, balance, tap = run_all([['param', 'set', 'controller', 'balance.kpp', '.nan'],
+                                        ['param', 'set', 'controller', 'mode', 'bogus'],
+                                        ['mode', 'balance'], ['tap', '500']], env)
+    assert nan.returncode == 1 and 'out of range' in nan.stderr and 'nan' in nan.stderr, nan
+    # (an unstable set refused by the param tool: test_control_system's live gain change)
+    assert bogus.returncode == 1 and 'mode' in bogus.stderr, bogus
+    assert balance.returncode == 1 and 'theta_0' in balance.stderr, balance
+    assert tap.returncode == 1, tap
+    assert f'balance.kpp: {kpp!r}' in run(['param', 'get', 'controller', 'balance.kpp'], env).stdout
+    assert client.value('controller', 'mode') == 'off'
+    # a designed gain set applied as a whole
+    run(['gains', 'pdd', '--w0', '2wp', '--apply'], env)
+    p = run(['param', 'get', 'controller', 'balance.kpp'], env)
+    assert float(p.stdout.split(':')[1]) == pytest.approx(-440.49, abs=0.1)
+    # a mode set; e-stop raise / clear
+    assert run(['mode', 'swingup'], env).returncode == 0
+    assert 'raised' in run(['estop'], env).stdout
+    assert 'cleared' in run(['estop', '--clear'], env).stdout
