@@ -35,7 +35,10 @@ Encoders (Section 3.1): round(theta / delta), round((theta_r - theta) / delta),
 delta = 2 pi / 4000; the simulated encoders were zeroed with the pendulum hanging at rest,
 whatever the initial state, so counts are absolute angles from hanging.
 
-Pure Python (math only, no numpy in the per-sample path): no rclpy.
+Pure Python (math only, no numpy in the per-sample path): no rclpy.  The equations are written
+once, as functions of the plant's constants and state that take floats or numpy arrays alike
+(:func:`free_derivative`, :func:`free_substep`, :func:`stuck_substep` ...): :class:`Plant` steps
+one rig with them, rwpend_sweep.batch many rigs at once, bit for bit the same.
 """
 from __future__ import annotations
 
@@ -59,6 +62,117 @@ class PlantState:
     torque: float = 0.0        # applied motor torque (control units), after lag and cut-off
     friction: float = 0.0      # rotor friction acting (control units)
     stuck: bool = False        # rotor stuck to the pendulum
+
+
+# ---------------------------------------------------------------------- the model, written once
+# The functions below are the plant's equations for one rig (a :class:`Plant`, plain floats) or
+# for many at once (rwpend_sweep.batch: one numpy array per constant and per state variable, a
+# rig per element). ``p`` holds the constants under the names Plant gives them (_na = -a, _bp,
+# _br, _cp, _stuck_gain, _wmax, _nwmax = -omega_max, _cpos, _vpos, _ncneg = -c_neg, _vneg, _dt,
+# _decay, _half_decay, the flags friction_on and back_emf, and _push = b_p d of the disturbance
+# d); ``sin`` is math.sin or numpy.sin and ``where(c, a, b)`` is :func:`pick` or numpy.where -- a
+# branch only where the scalar model branches, both sides computed (no side effects). Elementwise
+# + - * / and the comparisons are the same IEEE operations for floats and float64 arrays, and the
+# operations come in the same order: the two give the same bits (rwpend_sweep/test/test_batch.py).
+
+
+def pick(c, a, b):
+    """``where`` of plain floats: a if c else b."""
+    return a if c else b
+
+
+def pwm_quantize(p, u, floor=math.floor):
+    """The command u (|u| <= u_max) at the PWM duty resolution (Section 2.5): the nearest
+    multiple of u_max / pwm_steps (``p._pwm_q``, not zero)."""
+    return floor(u / p._pwm_q + 0.5) * p._pwm_q
+
+
+def kinetic_friction(p, w, where=pick):
+    """Rotor friction F (control units) while the rotor slips at relative speed w = w_rel
+    (3.17, ERRATA E46): c+ + v+ w above zero, -c- + v- w below, zero at zero."""
+    return where(w > 0.0, p._cpos + p._vpos * w, where(w < 0.0, p._ncneg + p._vneg * w, 0.0))
+
+
+def torque_available(p, tau, w, where=pick):
+    """Back-EMF cut-off (2.13): no torque in the direction of motion beyond V_max/k (w: the
+    rotor's speed relative to the pendulum)."""
+    return where(p.back_emf and (((tau > 0.0) & (w > p._wmax)) | ((tau < 0.0) & (w < p._nwmax))), 0.0, tau)
+
+
+def free_derivative(p, th, thd, thrd, tau, sin=math.sin, where=pick):
+    """(theta'', theta_r'', F) of (2.15) with the rotor turning freely: theta'' = -a sin(theta)
+    + b_p d - c_p theta' - b_p (tau - F), theta_r'' = b_r (tau - F), tau after the back-EMF
+    cut-off (2.13), F the kinetic friction (3.17) (zero with friction off)."""
+    w = thrd - thd
+    tau = torque_available(p, tau, w, where)
+    f = kinetic_friction(p, w, where) if p.friction_on else 0.0
+    grav = p._na * sin(th) + p._push - p._cp * thd
+    g = tau - f
+    return grav - p._bp * g, p._br * g, f
+
+
+def stuck_acceleration(p, th, thd, sin=math.sin):
+    """theta'' = theta_r'' with the rotor stuck to the pendulum, one rigid body (Section 2.3):
+    J / (J + J_r) (-a sin(theta) + b_p d - c_p theta')."""
+    return (p._na * sin(th) + p._push - p._cp * thd) * p._stuck_gain
+
+
+def stuck_derivative(p, th, thd, thrd, tau, sin=math.sin, where=pick):
+    """(theta'', theta_r'', F) with the rotor stuck to the pendulum (:func:`stuck_acceleration`),
+    F the friction the bearing must supply to hold the rotor, tau - theta_r'' / b_r."""
+    tau = torque_available(p, tau, thrd - thd, where)
+    acc = stuck_acceleration(p, th, thd, sin)
+    return acc, acc, tau - acc / p._br
+
+
+def lag_response(p, tau0, u):
+    """The current loop's first-order lag T_e (Section 2.4), its exact response to the held
+    command u over a sub-step from the torque tau0: (torque at the middle, at the end)."""
+    return u + (tau0 - u) * p._half_decay, u + (tau0 - u) * p._decay
+
+
+def free_substep(p, deriv, th, thd, thr, thrd, tau0, tau_mid, tau1):
+    """One classical RK4 sub-step of dt = p._dt of the rotor turning freely: (theta, theta',
+    theta_r, theta_r') after it. ``deriv(theta, theta', theta_r', tau)`` gives (theta'',
+    theta_r''); the motor torque is tau0, tau_mid, tau1 at the sub-step's start, middle, end."""
+    dt = p._dt
+    a1, r1 = deriv(th, thd, thrd, tau0)
+    a2, r2 = deriv(th + 0.5 * dt * thd, thd + 0.5 * dt * a1, thrd + 0.5 * dt * r1, tau_mid)
+    a3, r3 = deriv(th + 0.5 * dt * thd + 0.25 * dt * dt * a1, thd + 0.5 * dt * a2,
+                   thrd + 0.5 * dt * r2, tau_mid)
+    a4, r4 = deriv(th + dt * thd + 0.5 * dt * dt * a2, thd + dt * a3, thrd + dt * r3, tau1)
+    th = th + dt * (thd + dt / 6.0 * (a1 + a2 + a3))
+    thr = thr + dt * (thrd + dt / 6.0 * (r1 + r2 + r3))
+    thd = thd + dt / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4)
+    thrd = thrd + dt / 6.0 * (r1 + 2 * r2 + 2 * r3 + r4)
+    return th, thd, thr, thrd
+
+
+def stuck_substep(p, acc, th, thd, thr, tau0, u):
+    """One RK4 sub-step of the rotor stuck to the pendulum, one rigid body (Section 2.3): theta
+    integrated, the rotor follows; (theta, theta', theta_r, theta_r', tau) after it.
+    ``acc(theta, theta', theta_r', tau)`` gives theta'' (:func:`stuck_acceleration`)."""
+    dt = p._dt
+    tau_mid, tau1 = lag_response(p, tau0, u)
+    k1 = acc(th, thd, thd, tau0)
+    k2 = acc(th + 0.5 * dt * thd, thd + 0.5 * dt * k1, 0.0, tau_mid)
+    k3 = acc(th + 0.5 * dt * (thd + 0.5 * dt * k1), thd + 0.5 * dt * k2, 0.0, tau_mid)
+    k4 = acc(th + dt * (thd + 0.5 * dt * k2), thd + dt * k3, 0.0, tau1)
+    dth = dt * (thd + dt / 6.0 * (k1 + k2 + k3))
+    thd_new = thd + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return th + dth, thd_new, thr + dth, thd_new, tau1
+
+
+def crossed_zero(w0, w1):
+    """The relative speed reached or crossed zero over a sub-step (w0 before, w1 after): the
+    rotor may stick (3.17)."""
+    return (w0 == 0.0) | (w1 == 0.0) | ((w0 > 0.0) != (w1 > 0.0))
+
+
+def stick_velocity(j_ratio, thd, thrd):
+    """The common speed of pendulum and rotor when the rotor sticks, momentum-conserving:
+    j theta' + (1 - j) theta_r', j = J / (J + J_r)."""
+    return j_ratio * thd + (1.0 - j_ratio) * thrd
 
 
 class Plant:
@@ -96,11 +210,13 @@ class Plant:
         self._dt = self.h / n
         # model constants
         self._a = rig.a
+        self._na = -self._a
         self._bp = rig.b_p
         self._br = rig.b_r
         self._cp = rig.pendulum_damping if self.pendulum_friction_on else 0.0
         self._stuck_gain = rig.b_r / (rig.b_r + rig.b_p)     # J / (J + J_r)
         self._wmax = rig.omega_max
+        self._nwmax = -self._wmax
         self._umax = rig.u_max
         self._pwm_q = rig.u_max / rig.pwm_steps if self.pwm else 0.0
         self._te = rig.motor_time_constant if self.motor_lag else 0.0
@@ -110,6 +226,7 @@ class Plant:
         self._half_decay = math.exp(-0.5 * dt / te) if te > 0 else 0.0
         self._cpos, self._vpos = rig.friction_coulomb_pos, rig.friction_viscous_pos
         self._cneg, self._vneg = rig.friction_coulomb_neg, rig.friction_viscous_neg
+        self._ncneg = -self._cneg
         self._fbreak = rig.friction_breakaway
         self._delta = rig.count_angle
         # state
@@ -123,6 +240,11 @@ class Plant:
         self._free = None               # the sub-steps of free motion (_free_run) ...
         self._free_for = None           # ... made for this disturbance
 
+    @property
+    def _push(self) -> float:
+        """b_p d: the disturbance d on the pendulum in (2.15) (ERRATA E20)."""
+        return self._bp * self.disturbance
+
     # ------------------------------------------------------------------ inputs
     def quantize_command(self, u: float) -> float:
         """The command the amplifier realises: 0 if not finite, saturated, PWM-quantized (2.14)."""
@@ -131,7 +253,7 @@ class Plant:
         umax = self._umax
         u = umax if u > umax else (-umax if u < -umax else u)
         if self._pwm_q:
-            u = math.floor(u / self._pwm_q + 0.5) * self._pwm_q
+            u = pwm_quantize(self, u)
         return u
 
     def tap(self, dv: float) -> None:
@@ -158,53 +280,34 @@ class Plant:
 
     # ------------------------------------------------------------------ model
     def _kinetic_friction(self, w: float) -> float:
-        if w > 0.0:
-            return self._cpos + self._vpos * w
-        if w < 0.0:
-            return -self._cneg + self._vneg * w
-        return 0.0
+        """:func:`kinetic_friction` (3.17) of this rig."""
+        return kinetic_friction(self, w)
 
     def _torque_available(self, tau: float, w: float) -> float:
-        """Back-EMF cut-off (2.13): no torque in the direction of motion beyond V_max/k."""
-        if self.back_emf and ((tau > 0.0 and w > self._wmax) or (tau < 0.0 and w < -self._wmax)):
-            return 0.0
-        return tau
+        """:func:`torque_available`: the back-EMF cut-off (2.13) of this rig."""
+        return torque_available(self, tau, w)
 
     def _deriv(self, th, thd, thrd, tau, stuck):
-        """(theta'', theta_r'', F) for the given state and applied torque."""
-        w = thrd - thd
-        tau = self._torque_available(tau, w)
+        """(theta'', theta_r'', F) for the given state and applied torque: (2.15) through
+        :func:`free_derivative` or :func:`stuck_derivative`, or the bracket's wheel alone."""
         if self.bracket:   # Fig. 3.1: pendulum locked, theta'' = 0; the wheel alone (3.1)
+            w = thrd - thd
+            tau = self._torque_available(tau, w)
             if stuck:
                 return 0.0, 0.0, tau
             f = self._kinetic_friction(w) if self.friction_on else 0.0
             return 0.0, self._br * (tau - f), f
-        grav = -self._a * math.sin(th) + self._bp * self.disturbance - self._cp * thd
-        if stuck:
-            acc = grav * self._stuck_gain
-            return acc, acc, tau - acc / self._br
-        f = self._kinetic_friction(w) if self.friction_on else 0.0
-        return grav - self._bp * (tau - f), self._br * (tau - f), f
+        return (stuck_derivative if stuck else free_derivative)(self, th, thd, thrd, tau)
 
     def _free_substep_plain(self, th, thd, thr, thrd, tau0, tau_mid, tau1):
         """One RK4 sub-step of dt of the rotor turning freely (not stuck): (theta, theta',
         theta_r, theta_r') after it, with the motor torque tau0, tau_mid, tau1 at its start,
-        middle and end (the lag's exact response).  The plain form, through :meth:`_deriv`
-        (2.15); :meth:`_free_run` does the same arithmetic without the calls."""
-        dt = self._dt
-
+        middle and end (the lag's exact response).  The plain form, :func:`free_substep`
+        through :meth:`_deriv` (2.15); :meth:`_free_run` does the same arithmetic without the
+        calls."""
         def d(th, thd, thrd, tau):
             return self._deriv(th, thd, thrd, tau, False)[:2]
-        a1, r1 = d(th, thd, thrd, tau0)
-        a2, r2 = d(th + 0.5 * dt * thd, thd + 0.5 * dt * a1, thrd + 0.5 * dt * r1, tau_mid)
-        a3, r3 = d(th + 0.5 * dt * thd + 0.25 * dt * dt * a1, thd + 0.5 * dt * a2,
-                   thrd + 0.5 * dt * r2, tau_mid)
-        a4, r4 = d(th + dt * thd + 0.5 * dt * dt * a2, thd + dt * a3, thrd + dt * r3, tau1)
-        th += dt * (thd + dt / 6.0 * (a1 + a2 + a3))
-        thr += dt * (thrd + dt / 6.0 * (r1 + r2 + r3))
-        thd += dt / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4)
-        thrd += dt / 6.0 * (r1 + 2 * r2 + 2 * r3 + r4)
-        return th, thd, thr, thrd
+        return free_substep(self, d, th, thd, thr, thrd, tau0, tau_mid, tau1)
 
     def _free_run_plain(self, th, thd, thr, thrd, tau0, u, n):
         """Up to ``n`` sub-steps of free motion from the motor torque tau0 with the command u
@@ -214,13 +317,12 @@ class Plant:
         through :meth:`_free_substep_plain`; :meth:`_free_run` is the same arithmetic."""
         for j in range(1, n + 1):
             # motor current lag: exact exponential response to the held command
-            tau_mid = u + (tau0 - u) * self._half_decay
-            tau1 = u + (tau0 - u) * self._decay
+            tau_mid, tau1 = lag_response(self, tau0, u)
             w0 = thrd - thd
             th, thd, thr, thrd = self._free_substep_plain(th, thd, thr, thrd, tau0, tau_mid, tau1)
             tau0 = tau1
             w1 = thrd - thd
-            if self.friction_on and (w0 == 0.0 or w1 == 0.0 or (w0 > 0.0) != (w1 > 0.0)):
+            if self.friction_on and crossed_zero(w0, w1):
                 return th, thd, thr, thrd, tau0, j, True
         return th, thd, thr, thrd, tau0, n, False
 
@@ -282,18 +384,11 @@ class Plant:
 
     def _stuck_substep(self, th, thd, thr, tau0, u):
         """One RK4 sub-step of the rotor stuck to the pendulum, one rigid body (Section 2.3):
-        theta integrated, the rotor follows; (theta, theta', theta_r, theta_r', tau) after it."""
-        dt = self._dt
-        tau_mid = u + (tau0 - u) * self._half_decay
-        tau1 = u + (tau0 - u) * self._decay
-        d = self._deriv
-        k1 = d(th, thd, thd, tau0, True)[0]
-        k2 = d(th + 0.5 * dt * thd, thd + 0.5 * dt * k1, 0.0, tau_mid, True)[0]
-        k3 = d(th + 0.5 * dt * (thd + 0.5 * dt * k1), thd + 0.5 * dt * k2, 0.0, tau_mid, True)[0]
-        k4 = d(th + dt * (thd + 0.5 * dt * k2), thd + dt * k3, 0.0, tau1, True)[0]
-        dth = dt * (thd + dt / 6.0 * (k1 + k2 + k3))
-        thd_new = thd + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return th + dth, thd_new, thr + dth, thd_new, tau1
+        theta integrated, the rotor follows; (theta, theta', theta_r, theta_r', tau) after it
+        (:func:`stuck_substep` through :meth:`_deriv`)."""
+        def acc(th, thd, thrd, tau):
+            return self._deriv(th, thd, thrd, tau, True)[0]
+        return stuck_substep(self, acc, th, thd, thr, tau0, u)
 
     def _required_friction(self, th, thd, tau):
         """Friction (units) the bearing must supply to keep the rotor stuck."""
@@ -305,7 +400,8 @@ class Plant:
         sub-step boundaries (stick/slip events)."""
         umax, q = self._umax, self._pwm_q
         if type(u) is float and -umax <= u <= umax:
-            # quantize_command of a command within the limits written out (every sample's path)
+            # quantize_command of a command within the limits, pwm_quantize written out (every
+            # sample's path)
             if q:
                 u = math.floor(u / q + 0.5) * q
         else:
@@ -334,8 +430,7 @@ class Plant:
             # relative speed crossed zero: stick if the bearing can hold the rotor
             if crossed and abs(self._required_friction(th, thd, tau0)) <= fb:
                 j_ratio = 1.0 if self.bracket else self._stuck_gain   # J / (J + J_r)
-                v = j_ratio * thd + (1.0 - j_ratio) * thrd   # momentum-conserving
-                thd = thrd = v
+                thd = thrd = stick_velocity(j_ratio, thd, thrd)   # momentum-conserving
                 stuck = True
         self._x = [th, thd, thr, thrd]
         self._tau = tau0
