@@ -254,12 +254,15 @@ class SimHardware:
 
     ``read`` gives sample k; ``write`` offers the command answering it (the core's freshness
     rule: refused when ``command_timeout_samples`` old, non-finite or for a future sample);
-    ``advance`` integrates [t_k, t_k+1) with the command held then (zero on timeout or e-stop)."""
+    ``advance`` integrates [t_k, t_k+1) with the command held then (zero on timeout or e-stop).
+    ``truth`` False: the readings carry no :class:`Truth` (a study's batch keeps the plant's
+    truth itself, rwpend_sweep.batch)."""
 
-    def __init__(self, core: SimCore) -> None:
+    def __init__(self, core: SimCore, truth: bool = True) -> None:
         self.core = core
         self.u_max = core.rig.u_max
         self._u_prev = 0.0
+        self.truth = bool(truth)
 
     @property
     def k(self) -> int:
@@ -270,6 +273,9 @@ class SimHardware:
         :meth:`Plant.readout` for both)."""
         core = self.core
         plant = core.plant
+        if not self.truth:
+            pc, mc = plant.counts()
+            return Reading(core.k, pc, mc, self._u_prev)
         pc, mc, th, thd, thr, thrd, torque, friction, stuck = plant.readout()
         truth = Truth(th, thd, thr, thrd, plant.u_held, torque, friction, plant.disturbance, bool(stuck),
                       bool(core.timed_out), core.held_seq)
