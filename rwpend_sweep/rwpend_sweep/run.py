@@ -11,6 +11,9 @@ integrated before the next, until the simulator's ``duration``): the samples are
 Two perturbations the simulator does not have sit between the plant and the loop, only when
 asked: :class:`PerturbedHardware` adds Gaussian noise to the encoder counts
 (``sensor.noise_counts``) and applies each command ``command.delay_samples`` samples late.
+
+:func:`run_one` runs one run alone; :func:`run_many` (a worker's task) steps its runs together,
+their plants one numpy batch (:mod:`rwpend_sweep.batch`), each row the one :func:`run_one` gives.
 """
 from __future__ import annotations
 
@@ -96,8 +99,9 @@ class PerturbedHardware:
         self.hw.no_command()
 
 
-def build_loop(setup: RunSetup) -> Loop:
-    """The loop of one run (as rwpend_loop.host builds it from the nodes)."""
+def build_loop(setup: RunSetup, truth: bool = True) -> Loop:
+    """The loop of one run (as rwpend_loop.host builds it from the nodes); ``truth`` False: its
+    readings without the plant's truth (SimHardware's ``truth``)."""
     s = setup
     ini = s.initial
     core = SimCore(s.truth, command_timeout_samples=s.sim['command_timeout_samples'],
@@ -108,7 +112,7 @@ def build_loop(setup: RunSetup) -> Loop:
     if s.torques:
         core.schedule_torques([t for t, _, _ in s.torques], [d for _, d, _ in s.torques],
                               [dur for _, _, dur in s.torques])
-    hw = SimHardware(core)
+    hw = SimHardware(core, truth=truth)
     if s.noise_counts > 0 or s.delay:
         hw = PerturbedHardware(hw, s.noise_counts, s.delay, s.noise_seed)
     # in lockstep the simulator's loop health counts in units of its lockstep_timeout
@@ -200,8 +204,10 @@ def run_one(setup: RunSetup, success) -> dict:
 
 
 def run_many(items: list) -> list[tuple[int, dict]]:
-    """[(index, setup, success), ...] -> [(index, row), ...] (one task of a pool or a cluster)."""
-    return [(i, run_one(s, succ)) for i, s, succ in items]
+    """[(index, setup, success), ...] -> [(index, row), ...] (one task of a pool or a cluster):
+    the rows of :func:`run_one`, the runs' plants stepped together (:mod:`rwpend_sweep.batch`)."""
+    from .batch import run_batch
+    return run_batch(items)
 
 
 def samples_of(setup: RunSetup) -> Trace:
