@@ -485,6 +485,11 @@ FUZZER = textwrap.dedent('''
     rnd = random.Random(seed)
     rclpy.init()
     node = Node('fuzzer')
+    # one executor for the whole run: rclpy.spin_once(node) adds and removes the node at every
+    # call, which rebuilds the wait set each time (most of the run's wall time, one response a call)
+    from rclpy.executors import SingleThreadedExecutor
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
     SPECIAL = [math.nan, math.inf, -math.inf, 1e308, -1e308, 1e12, -1e12, 0.0, -0.0, 5e-324, -1.0, 1e-300]
     def f():
         r = rnd.random()
@@ -522,9 +527,11 @@ FUZZER = textwrap.dedent('''
                 and abs(m.u_commanded) <= 10.0):
             seen['bad_truth'] += 1
     diags = {}
+    rounds = {}     # /diagnostics received per status name
     def on_diag(a):
         for s in a.status:
             diags[s.name] = (s.message, {kv.key: kv.value for kv in s.values})
+            rounds[s.name] = rounds.get(s.name, 0) + 1
     node.create_subscription(MotorCommand, '/fz_c/command', on_cmd, QOS_CONTROL)
     node.create_subscription(StateEstimate, '/fz_e/state', on_state, QOS_CONTROL)
     node.create_subscription(PlantState, '/fz_s/sim/true_state', on_truth, QOS_CONTROL)
@@ -532,7 +539,7 @@ FUZZER = textwrap.dedent('''
     def spin(s):
         end = time.monotonic() + s
         while time.monotonic() < end:
-            rclpy.spin_once(node, timeout_sec=0.005)
+            ex.spin_once(timeout_sec=0.005)
     end = time.monotonic() + 30
     while time.monotonic() < end and not all(p.get_subscription_count() > 0 for p in pubs.values()):
         spin(0.1)
@@ -566,7 +573,7 @@ FUZZER = textwrap.dedent('''
             last, quiet = (seen['commands'], seen['states']), time.monotonic()
             while time.monotonic() < end and (seen['commands'] < 0.9 * sent['state'] - 300
                                               or seen['states'] < 0.6 * sent['encoders'] - 300):
-                rclpy.spin_once(node, timeout_sec=0.005)
+                ex.spin_once(timeout_sec=0.005)
                 if (seen['commands'], seen['states']) != last:
                     last, quiet = (seen['commands'], seen['states']), time.monotonic()
                 elif time.monotonic() - quiet > 0.05:
@@ -665,7 +672,7 @@ FUZZER = textwrap.dedent('''
             while issued[name] < n_srv and len(pending[name]) < WINDOW:
                 pending[name].append((time.monotonic(), cli.call_async(make())))
                 issued[name] += 1
-        rclpy.spin_once(node, timeout_sec=0.01)
+        ex.spin_once(timeout_sec=0.01)
         for name, (cli, make) in clients.items():
             keep = []
             for t_sent, p in pending[name]:
@@ -685,9 +692,13 @@ FUZZER = textwrap.dedent('''
     fut = clients['ctl_set_mode'][0].call_async(SetMode.Request(mode='off'))
     end = time.monotonic() + 10
     while not fut.done() and time.monotonic() < end:
-        rclpy.spin_once(node, timeout_sec=0.01)
+        ex.spin_once(timeout_sec=0.01)
     alive = fut.done() and fut.result().success
-    spin(2.5)   # one more round of /diagnostics
+    # one more round of the controller's /diagnostics (its counts after the services: printed)
+    ctl_rounds = rounds.get('/fz_c/controller', 0)
+    end = time.monotonic() + 2.5
+    while rounds.get('/fz_c/controller', 0) <= ctl_rounds and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.01)
     json.dump({'sent': sent, 'seen': seen, 'tail': tail, 'services': srv, 'diags': diags,
                'diags_msgs': diags_msgs if n_srv else diags, 'alive': alive,
                't_msgs': t_msgs, 't_services': time.monotonic() - t1}, open(out, 'w'))
