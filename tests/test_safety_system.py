@@ -927,6 +927,54 @@ DRIVER_CMD_NODE = textwrap.dedent('''
 ''')
 
 
+def emulator_events(P: Procs) -> list[dict]:
+    """The emulator's JSON lines so far."""
+    ev = []
+    for line in P.log('emulator').splitlines():
+        try:
+            ev.append(json.loads(line))
+        except ValueError:
+            pass
+    return ev
+
+
+def disable_index(ev) -> int | None:
+    """The device's disable after it applied u = 2 (the e-stop), or None."""
+    return next((i for i, e in enumerate(ev) if e['event'] == 'disable' and i > 0
+                 and any(x['event'] == 'status' and x['u_applied'] == 2.0 for x in ev[:i])), None)
+
+
+def zero_after_disable(ev) -> list[dict]:
+    """The status lines after the e-stop's disable (until an enable)."""
+    dis = disable_index(ev)
+    if dis is None:
+        return []
+    out = []
+    for e in ev[dis + 1:]:
+        if e['event'] == 'enable':
+            break
+        if e['event'] == 'status':
+            out.append(e)
+    return out
+
+
+def applied_after_enable(ev) -> bool:
+    """u = 2 applied and the amplifier on again after the enable that follows the disable."""
+    dis = disable_index(ev)
+    ena = None if dis is None else next((i for i, e in enumerate(ev) if e['event'] == 'enable' and i > dis), None)
+    return ena is not None and any(e['event'] == 'status' and e['u_applied'] == 2.0 and e['enabled']
+                                   for e in ev[ena:])
+
+
+def wait_events(P: Procs, cond, timeout: float) -> None:
+    """Until ``cond`` holds on the emulator's events (polled; AssertionError after ``timeout`` s)."""
+    end = time.monotonic() + timeout
+    while not cond(emulator_events(P)):
+        assert time.monotonic() < end, P.log('emulator')[-3000:]
+        assert P.procs['emulator'].poll() is None, P.log('emulator')[-3000:]
+        time.sleep(0.05)
+
+
 @pytest.mark.timeout(90)
 def test_driver_estop_zeroes_the_device_until_cleared(tmp_path, ros_env):
     """Through the serial driver: the emulated device's applied torque is 0 and its amplifier
@@ -943,20 +991,16 @@ def test_driver_estop_zeroes_the_device_until_cleared(tmp_path, ros_env):
         # the device applies the commander's u = 2 before the e-stop (on a loaded machine the
         # first commands may take longer than a fixed pause)
         P.wait_log('emulator', '"u_applied": 2.0', 30)
-        time.sleep(0.5)
         assert 'raised' in rwpend(['estop', '--ns', '/'], ros_env).stdout
-        time.sleep(1.5)
+        # the device's status lines (every 50 ms) as they come: 20 at zero after the disable,
+        # then the u = 2 applied again after the enable
+        wait_events(P, lambda ev: len(zero_after_disable(ev)) >= 20, 30)
         assert 'cleared' in rwpend(['estop', '--ns', '/', '--clear'], ros_env).stdout
-        time.sleep(1.5)
+        wait_events(P, lambda ev: applied_after_enable(ev), 30)
     finally:
         P.stop_all(['commander', 'driver', 'emulator'])
     no_tracebacks(P, ['driver', 'commander'])
-    ev = []
-    for line in P.log('emulator').splitlines():
-        try:
-            ev.append(json.loads(line))
-        except ValueError:
-            pass
+    ev = emulator_events(P)
     dis = next(i for i, e in enumerate(ev) if e['event'] == 'disable' and i > 0
                and any(x['event'] == 'status' and x['u_applied'] == 2.0 for x in ev[:i]))
     ena = next(i for i, e in enumerate(ev) if e['event'] == 'enable' and i > dis)
