@@ -111,6 +111,72 @@ class Procs:
             self.stop(tag)
 
 
+class DiagWatch:
+    """The simulator's /diagnostics as they come, received in a thread of the test's process (own
+    context, the test's domain): the waits for simulated time in lockstep, where a wall-clock
+    pause is far too long on an idle machine and may be too short on a loaded one."""
+
+    def __init__(self, env: dict, name: str = NS + '/sim: plant') -> None:
+        import threading
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.executors import SingleThreadedExecutor
+        from rwpend_ros.qos import QOS_STATUS
+        self.name, self.seen, self.cv = name, [], threading.Condition()
+        self._range = os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = env.get('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=int(env['ROS_DOMAIN_ID']))
+        self.node = rclpy.create_node('diag_watch', context=self.ctx, start_parameter_services=False)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on, QOS_STATUS)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        while self.ctx.ok():
+            try:
+                self.ex.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: BLE001 - the context shut down under it
+                return
+
+    def _on(self, a) -> None:
+        for st in a.status:
+            if st.name == self.name:
+                with self.cv:
+                    self.seen.append({kv.key: kv.value for kv in st.values})
+                    self.cv.notify_all()
+
+    def wait(self, cond, timeout: float, what: str) -> dict:
+        """The first diagnostics values (from now on, in order) for which ``cond(values)`` holds."""
+        end = time.monotonic() + timeout
+        with self.cv:
+            i = 0
+            while True:
+                for v in self.seen[i:]:
+                    if cond(v):
+                        return v
+                i = len(self.seen)
+                left = end - time.monotonic()
+                assert left > 0, f'{what}: not within {timeout} s; last: {self.seen[-1:]}'
+                self.cv.wait(min(left, 0.2))
+
+    def latest(self) -> dict:
+        with self.cv:
+            return self.seen[-1] if self.seen else {}
+
+    def close(self) -> None:
+        import rclpy
+        rclpy.shutdown(context=self.ctx)
+        self.thread.join(timeout=5)
+        self.node.destroy_node()
+        if self._range is None:
+            os.environ.pop('ROS_AUTOMATIC_DISCOVERY_RANGE', None)
+        else:
+            os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = self._range
+
+
 def rwpend(args, env, timeout=60, check=True):
     p = subprocess.run([RWPEND, *args], env=env, capture_output=True, text=True, timeout=timeout)
     if check and p.returncode != 0:
@@ -844,21 +910,30 @@ def test_estop_holds_the_plant_at_zero_until_cleared(tmp_path, ros_env):
     stack = subprocess.Popen([RWPEND, 'up', '--lockstep', '--mode', 'auto', '--theta0', str(UPRIGHT),
                               '--record', str(bag), '--set', f'sim.lockstep_timeout={LOCKSTEP_TIMEOUT}'],
                              env=ros_env, stdout=open(log, 'w'), stderr=subprocess.STDOUT, start_new_session=True)
+    watch = DiagWatch(ros_env)
     try:
         end = time.monotonic() + 60
         while 'auto/catch' not in log.read_text() and time.monotonic() < end:
             assert stack.poll() is None, log.read_text()[-3000:]
             time.sleep(0.1)
-        time.sleep(1.5)
+        # waits in simulated time (the simulator's /diagnostics: one a simulated second): 1.5 s
+        # balancing; then 2 more reports under the e-stop (the bag's 'held' is between the first
+        # report of it and the first after the clear: >= 1 s); then 1 s after the first report
+        # of the clear
+        watch.wait(lambda v: int(v['samples']) >= 1500, 60, 'balancing')
         t_raise = time.time_ns()
         assert 'raised' in rwpend(['estop'], ros_env).stdout
         t_raised = time.time_ns()
-        time.sleep(2.0)
+        on = watch.wait(lambda v: v['estop'] == 'True', 30, 'the e-stop reported')
+        watch.wait(lambda v: v['estop'] == 'True' and int(v['samples']) >= int(on['samples']) + 1000, 30,
+                   '1 s under the e-stop')
         t_clear = time.time_ns()
         assert 'cleared' in rwpend(['estop', '--clear'], ros_env).stdout
         t_cleared = time.time_ns()
-        time.sleep(2.0)
+        off = watch.wait(lambda v: v['estop'] == 'False', 30, 'the clear reported')
+        watch.wait(lambda v: int(v['samples']) >= int(off['samples']) + 1000, 30, '1 s after the clear')
     finally:
+        watch.close()
         stack.send_signal(signal.SIGINT)
         stack.wait(timeout=40)
     out = log.read_text()
