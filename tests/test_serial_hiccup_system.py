@@ -121,21 +121,49 @@ def stop_stack_and_emulator(emu, stack) -> None:
     emu.wait(timeout=10)
 
 
-def stall_then_unplug(emu, domain: str, origin: float) -> float:
+def stall_then_unplug(emu, emu_log, domain: str, origin: float) -> float:
     """The driver process stalled for 0.2 s (the device's watchdog trips, the pty holds ~0.6 s),
-    then 5 s later the cable pulled for 0.5 s, then 8 s of the stack running on; the stall's
-    start on the emulator's clock."""
+    then, once the device is enabled again and the pendulum balanced 2 s after the trip (the
+    emulator's record), the cable pulled for 0.5 s, then the stack running on until the device has
+    been enabled again for 4 s and moved the motor (> 3000 samples after the replug in the bag);
+    the stall's start on the emulator's clock."""
     drv = driver_pid(domain)
     t_stop = time.monotonic() - origin
     os.kill(drv, signal.SIGSTOP)
     time.sleep(0.2)
     os.kill(drv, signal.SIGCONT)
-    time.sleep(5.0)
+    wait_events(emu_log, lambda evs: recovered_from_the_stall(evs, t_stop), 60, 'balanced again after the stall')
     emu.send_signal(signal.SIGUSR1)
     time.sleep(0.5)
     emu.send_signal(signal.SIGUSR2)
-    time.sleep(8.0)
+    wait_events(emu_log, running_after_the_replug, 90, 'running 4 s after the replug')
     return t_stop
+
+
+def recovered_from_the_stall(evs, t_stop: float) -> bool:
+    """The stall's watchdog trip, the device enabled after it, balanced for 2 s since."""
+    trip = next((e for e in evs if e['event'] == 'watchdog_trip' and e['t'] > t_stop), None)
+    return (trip is not None and any(e['event'] == 'enable' and e['t'] > trip['t'] for e in evs)
+            and balanced_for(evs, 2.0, after=trip['t']) is not None)
+
+
+def running_after_the_replug(evs) -> bool:
+    """Enabled again after the replug, 4 s since, the motor moved."""
+    unplug = next((e for e in evs if e['event'] == 'unplugged'), None)
+    replug = unplug and next((e for e in evs if e['event'] == 'plugged' and e['t'] > unplug['t']), None)
+    enabled = replug and next((e for e in evs if e['event'] == 'enable' and e['t'] > replug['t']), None)
+    if not enabled:
+        return False
+    after = [e for e in evs if e['event'] == 'status' and e['t'] > enabled['t']]
+    return bool(after) and after[-1]['t'] >= enabled['t'] + 4.0 and any(e['u_applied'] != 0.0 for e in after)
+
+
+def wait_events(path, cond, timeout: float, what: str) -> None:
+    """Until ``cond`` holds on the emulator's events (polled)."""
+    end = time.monotonic() + timeout
+    while not cond(events(path)):
+        assert time.monotonic() < end, f'{what}: not within {timeout} s'
+        time.sleep(0.2)
 
 
 def judge_the_stall(evs, t_stop: float, report: dict) -> None:
@@ -199,7 +227,7 @@ def test_stall_and_unplug_while_balancing(tmp_path, ros_env):
     link, bag, emu_log = tmp_path / 'rig', tmp_path / 'hiccups', tmp_path / 'emulator.log'
     emu, stack, origin = start_balancing_on_the_emulator(tmp_path, ros_env, link, bag, emu_log)
     try:
-        t_stop = stall_then_unplug(emu, ros_env['ROS_DOMAIN_ID'], origin)
+        t_stop = stall_then_unplug(emu, emu_log, ros_env['ROS_DOMAIN_ID'], origin)
     finally:
         stop_stack_and_emulator(emu, stack)
     evs = events(emu_log)
