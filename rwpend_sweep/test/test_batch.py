@@ -176,3 +176,37 @@ def test_readings_without_the_truth_are_the_readings_with_it():
         for hw in (a, b):
             hw.write(k, 3.0 if k < 100 else -12.0)
             hw.advance()
+
+
+def test_a_failing_run_and_a_plant_no_longer_finite_give_the_rows_of_the_runs_alone(monkeypatch):
+    """A run that fails to build is its error row; a run whose batched plant leaves the finite
+    numbers is run again alone (its row is then the scalar one, whatever it is); the others go on."""
+    from dataclasses import replace
+    from rwpend_sweep import batch as B
+    from rwpend_sweep import run as R
+    s = study_from_dict(DOC)
+    _, setups = prepare(s)
+    setups = [x for x in setups if x.model.sample_period == 0.001][:4]
+    setups[1] = replace(setups[1], mode='no such mode')
+    items = [(i, x, s.scenario.success) for i, x in enumerate(setups)]
+    step, calls, alone = B.BatchPlant.step, [0], []
+
+    def step_losing_lane_1(self):
+        finite = step(self)
+        calls[0] += 1
+        if calls[0] == 100:         # the second lane's plant (run 2) is no longer finite
+            finite = finite.copy()
+            finite[1] = False
+        return finite
+    run_one_ = R.run_one
+
+    def counted(setup, success):
+        alone.append(setup)
+        return run_one_(setup, success)
+    monkeypatch.setattr(B.BatchPlant, 'step', step_losing_lane_1)
+    monkeypatch.setattr(R, 'run_one', counted)
+    got = dict(run_batch(items))
+    assert alone == [setups[2]] and calls[0] > 100
+    assert got[1]['reason'].startswith('error:') and not got[1]['success']
+    for i, setup, success in items:
+        assert _row(got[i]) == _row(run_one_(setup, success)), f'run {i}'
