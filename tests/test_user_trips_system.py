@@ -41,7 +41,13 @@ VOLATILE_ESTOP = textwrap.dedent('''
         rclpy.spin_once(node, timeout_sec=0.05)
     print('matched', pub.get_subscription_count(), 'ready' if ready() else 'NOT READY', flush=True)
     pub.publish(Bool(data=sys.argv[1] == 'true'))
-    end = time.monotonic() + 1.0
+    # until every matched reader acknowledged it: matched on this side is not matched on the
+    # reader's (the simulator, busy with a lockstep loop on a loaded host, may learn of this
+    # writer a second or more later, and drops data from a writer it does not know yet; the
+    # reliable writer sends it again until acknowledged -- if it still lives)
+    from rclpy.duration import Duration
+    print('acked', pub.wait_for_all_acked(Duration(seconds=20)), flush=True)
+    end = time.monotonic() + 0.2
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
 ''')
@@ -106,7 +112,7 @@ def one_stack(tmp_path_factory):
         wait_for(log, 'auto/catch', stack)
         time.sleep(1.0)
         p = rwpend(['exec', 'python', '-c', VOLATILE_ESTOP, 'true'], env)
-        assert 'matched' in p.stdout and 'NOT READY' not in p.stdout, p.stdout
+        assert 'matched' in p.stdout and 'NOT READY' not in p.stdout and 'acked True' in p.stdout, p.stdout
         wait_for(log, 'E-STOP raised', stack, 20)
         wait_for(log, 'e-stop raised: off', stack, 20)      # the controller switched off
         time.sleep(1.0)
