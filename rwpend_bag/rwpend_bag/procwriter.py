@@ -31,6 +31,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from rwpend_ros.sched import RECORDER_BELOW
+
 from .writer import BagError, BagSink, check_new_bag_path
 
 #: seconds the child waits for a batch before closing an old chunk (BagSink.idle)
@@ -45,9 +47,6 @@ START_TIMEOUT_S = 30.0
 CLOSE_TIMEOUT_S = 120.0
 #: the child's process name (/proc/PID/comm, at most 15 characters)
 PROCESS_NAME = 'rwpend-bag'
-#: a real-time loop's writer: this many SCHED_FIFO priorities below the loop (as ./rwpend up
-#: puts a recorder process of its own)
-PRIORITY_BELOW = 10
 DIED_WITHOUT_CLOSE = ('the recording process ended without closing the bag: the bag holds what it '
                       'handed over before it ended')
 
@@ -63,14 +62,14 @@ def _name_process() -> None:
 
 
 def _below_the_loop() -> None:
-    """A real-time loop's writer runs :data:`PRIORITY_BELOW` SCHED_FIFO priorities below it (the
+    """A real-time loop's writer runs ``RECORDER_BELOW`` SCHED_FIFO priorities below it (the
     policy it inherited from the loop's process): above every ordinary process, so a busy
     machine cannot starve it while the loop fills its queue, and below the loop, which cannot
     wait. A loop at ordinary priority (lockstep) keeps its writer at ordinary priority."""
     try:
         if os.sched_getscheduler(0) == os.SCHED_FIFO:
             prio = os.sched_getparam(0).sched_priority
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, prio - PRIORITY_BELOW)))
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, prio - RECORDER_BELOW)))
     except (AttributeError, OSError):
         pass
 

@@ -272,11 +272,30 @@ Runs one node (like `ros2 run`) with the rig YAML and the stack defaults loaded,
 {NS} unless --ns (or --ros-args -r __ns:=...) is given. -p NAME:=VALUE overrides a
 parameter (rig data too: -p rig.g:=9.91); --params adds a ROS 2 params file (later wins).
 Real time as under `./rwpend up`: the node's `thread_priority` parameter (as ros2_control's)
-is 50 unless given, where SCHED_FIFO is permitted (0 for a lockstep simulator); -p
-thread_priority:=0 turns it off.
+is 50 unless given, where SCHED_FIFO is permitted (0 in lockstep: lockstep:=true or
+use_sim_time:=true); -p thread_priority:=0 turns it off.
 Examples:
   ./rwpend sim -p lockstep:=true -p initial.theta:=3.1416     # the simulator alone
   ./rwpend node estimator --ns /offline -p estimator:=observer3"""
+
+
+def ros_params_files(ros: list[str]) -> list[str]:
+    """The ``--params-file F`` of ROS arguments."""
+    return [ros[i + 1] for i, x in enumerate(ros[:-1]) if x == '--params-file']
+
+
+def ros_param_overrides(ros: list[str]) -> dict:
+    """The ``-p NAME:=VALUE`` of ROS arguments (YAML values, as rcl reads them)."""
+    import yaml
+    out: dict = {}
+    for i, x in enumerate(ros[:-1]):
+        if x in ('-p', '--param') and ':=' in ros[i + 1]:
+            key, val = ros[i + 1].split(':=', 1)
+            try:
+                out[key] = yaml.safe_load(val)
+            except yaml.YAMLError:
+                out[key] = val
+    return out
 
 
 def node_thread_priority(name: str, given: dict, permitted) -> tuple[int | None, str]:
@@ -290,8 +309,10 @@ def node_thread_priority(name: str, given: dict, permitted) -> tuple[int | None,
     ordinary priority left 20 % of the samples late at load ~2.4, at priority 50 0.11 %)."""
     if 'thread_priority' in given:
         return None, f'thread_priority {given["thread_priority"]} (given)'
-    if name == 'sim' and given.get('lockstep') is True:
-        return None, 'ordinary scheduling (a lockstep simulator, as ./rwpend up --lockstep)'
+    if given.get('lockstep') is True or given.get('use_sim_time') is True:
+        # a lockstep run goes as fast as its nodes answer: at real-time priority they would
+        # take both CPUs from everything else (a recorder lost a quarter of the samples)
+        return None, 'ordinary scheduling (lockstep, as ./rwpend up --lockstep)'
     ok, reason = permitted(DEFAULT_RT_PRIORITY)
     if not ok:
         return None, (f'ordinary scheduling: real-time priority not permitted here ({reason}); a busy '
@@ -386,8 +407,12 @@ def node_main(argv, name: str | None = None) -> int:
     from rwpend_model.rig import read_params_file
     from rwpend_ros.sched import realtime_permitted
     given: dict = {}
-    for f in files:
-        given.update(read_params_file(f, name))
+    for f in files + ros_params_files(rest_ros):
+        try:
+            given.update(read_params_file(f, name))
+        except (ValueError, OSError):
+            pass                                # rcl says what is wrong with it
+    given.update(ros_param_overrides(rest_ros))
     given.update(overrides)
     prio, why = node_thread_priority(name, given, realtime_permitted)
     if prio is not None:

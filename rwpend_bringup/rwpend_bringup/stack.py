@@ -22,6 +22,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rwpend_ros.sched import DEFAULT_RT_PRIORITY, RECORDER_BELOW
+
 from .launch import DEFAULT_NS, NodeSpec
 
 #: the nodes of a stack and the module of each one's process
@@ -40,8 +42,6 @@ COMPOSITIONS = ('loop', 'control')
 LAYOUTS = (*COMPOSITIONS, 'none')
 #: lockstep with a recorder: samples the simulator may run ahead of the recorder
 LOCKSTEP_RECORDER_WINDOW = 50
-#: real time: the loop's SCHED_FIFO priority where permitted
-DEFAULT_RT_PRIORITY = 50
 #: the layout per plant when none is given (PERFORMANCE.md, "Layouts")
 DEFAULT_LAYOUT = {'sim': 'loop', 'serial': 'loop'}
 LAYOUT_TEXT = {'loop': 'the loop in one real-time thread of one process (plant, estimator, controller '
@@ -409,7 +409,11 @@ def _apply_scheduling(stack: Stack, specs: list[NodeSpec]) -> None:
             # the loop keeps both CPUs busy and waits for the recorder (its window), so the
             # recorder runs at the loop's priority
             below = s.name == 'recorder' and not stack.lockstep
-            s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - 10) if below else prio)
+            s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - RECORDER_BELOW) if below else prio)
+    else:
+        for s in specs:
+            if s.module == 'rwpend_bag.cli':    # ordinary, as every process of this run
+                s.args = [*s.args, '--rt-priority', '0']
     if stack.cpu_latency is not None and stack.cpu_latency < 0:
         raise ValueError(f'--cpu-latency must be >= 0 (µs), got {stack.cpu_latency}')
     check_pins(stack.pins, [s.name for s in specs])

@@ -2,8 +2,8 @@
 ``./rwpend up`` gives its processes, unless the user set one or the simulator runs in lockstep."""
 from __future__ import annotations
 
-from rwpend_bringup.cli import node_thread_priority
-from rwpend_bringup.stack import DEFAULT_RT_PRIORITY
+from rwpend_bringup.cli import node_thread_priority, ros_param_overrides, ros_params_files
+from rwpend_ros.sched import DEFAULT_RT_PRIORITY
 
 
 def allowed(priority):
@@ -25,11 +25,21 @@ def test_what_the_user_gave_wins():
     assert node_thread_priority('sim', {'thread_priority': 70}, allowed) == (None, 'thread_priority 70 (given)')
 
 
-def test_a_lockstep_simulator_stays_at_ordinary_priority():
+def test_lockstep_stays_at_ordinary_priority():
+    """A lockstep run goes as fast as its nodes answer: at real-time priority they would take
+    both CPUs from everything else."""
     prio, why = node_thread_priority('sim', {'lockstep': True}, allowed)
     assert prio is None and 'lockstep' in why
-    # lockstep is the simulator's parameter: the other nodes answer it and keep the default
-    assert node_thread_priority('estimator', {'lockstep': True}, allowed)[0] == DEFAULT_RT_PRIORITY
+    assert node_thread_priority('estimator', {'use_sim_time': True}, allowed)[0] is None
+    assert node_thread_priority('controller', {'use_sim_time': False}, allowed)[0] == DEFAULT_RT_PRIORITY
+
+
+def test_parameters_given_after_ros_args_count(tmp_path):
+    f = tmp_path / 'p.yaml'
+    f.write_text('/**/sim:\n  ros__parameters:\n    lockstep: true\n')
+    ros = ['--params-file', str(f), '-p', 'use_sim_time:=true', '-r', '__ns:=/x']
+    assert ros_params_files(ros) == [str(f)]
+    assert ros_param_overrides(ros) == {'use_sim_time': True}
 
 
 def test_not_permitted_is_said_and_nothing_is_set():

@@ -6,6 +6,13 @@ import os
 import sys
 from typing import Mapping
 
+#: real time: the loop's (and a node's) SCHED_FIFO priority where permitted, as ros2_control's
+#: controller manager takes by default (./rwpend up, ./rwpend node)
+DEFAULT_RT_PRIORITY = 50
+#: a recorder (a process of its own, or the loop's bag writer) this many SCHED_FIFO priorities
+#: below the loop it records: above every ordinary process, below the loop, which cannot wait
+RECORDER_BELOW = 10
+
 
 def apply_scheduling(environ: Mapping[str, str] | None = None) -> dict:
     """Process priority and CPU affinity from the environment (set by the launcher per node).
