@@ -210,3 +210,13 @@ def test_a_failing_run_and_a_plant_no_longer_finite_give_the_rows_of_the_runs_al
     assert got[1]['reason'].startswith('error:') and not got[1]['success']
     for i, setup, success in items:
         assert _row(got[i]) == _row(run_one_(setup, success)), f'run {i}'
+
+
+def test_task_size_two_tasks_a_worker_within_the_batch_bounds():
+    from rwpend_sweep.execute import BATCH, BATCH_LEAST, task_size
+    assert task_size(1000, 2) == 250                 # four tasks: the progress moves
+    assert task_size(120, 2) == 60                   # a worker's whole share when it is small
+    assert task_size(10_000, 2) == BATCH
+    assert task_size(1, 4) == 1
+    assert all(min(BATCH_LEAST, -(-n // w)) <= task_size(n, w) <= BATCH
+               for n in (1, 7, 250, 999, 1000, 4321) for w in (1, 2, 3, 8))
