@@ -9,10 +9,7 @@ zero-order hold.  The device logic is the rig's firmware itself: the portable co
 ``firmware/core`` (C99, the code the STM32 board runs) built for this PC and called through
 ctypes (:mod:`rwpend_driver.firmware`); this module is its HAL -- the pty its UART, the plant
 model (:class:`rwpend_model.plant.Plant`) its motor and encoders, the sample clock this loop.
-The ready, status and exit lines name the firmware's version (``fw``).  Two threads, as on the
-microcontroller: the sample clock (the timer interrupt: tick, plant, SAMPLE out) only writes to
-the pty; the link thread (the UART's receive interrupt) reads the host's bytes into the core as
-they come, so a delivery the kernel has not made yet never holds up a sample instant.
+The ready, status and exit lines name the firmware's version (``fw``).
 
 Signals emulate the cable: SIGUSR1 = unplug (the pty is closed, the link removed; the device
 keeps running, so its watchdog zeroes the motor), SIGUSR2 = replug (a new pty, the link
@@ -84,15 +81,21 @@ class Pty:
             os.replace(tmp, link)          # atomic: the path never points nowhere
 
     def poll(self, timeout: float) -> int:
-        """The master's events after at most ``timeout`` s (0: none; POLLNVAL once closed).
-        Only the link thread calls it: a poll (or read) of a pty waits for the kernel's pending
-        delivery of the other side's bytes (``flush_to_ldisc``, run by an ordinary-priority
-        kworker), which a busy CPU can hold up for milliseconds."""
+        """The master's events after at most ``timeout`` s (0: none). The wait is select()'s,
+        to the microsecond: poll() counts whole milliseconds, rounded up, so a wait for the
+        next sample instant 0.3 ms away lasted 1 ms -- the SAMPLE went out 0.7 ms late and the
+        answer to it came after the next instant (16 % of the samples through the emulator)."""
         try:
-            ev = self.poller.poll(timeout * 1e3)
+            if timeout > 0:
+                select.select([self.master], [], [], timeout)   # readable on data and on hang-up
+            ev = self.poller.poll(0)
         except InterruptedError:
             return 0
         return ev[0][1] if ev else 0
+
+    def host_present(self) -> bool:
+        """A host has the port open (no hang-up on the master)."""
+        return not self.poll(0.0) & select.POLLHUP
 
     def close(self) -> None:
         if self.link:
@@ -210,8 +213,6 @@ class Emulator:
         # the firmware's core (FirmwareError when it cannot be built or loaded); the emulator steps the
         # plant between its tick_begin and tick_end
         self.core = FirmwareCore(self.rig, watchdog_ms=args.watchdog_ms, on_event=self.on_core_event)
-        #: held by whoever calls the core or changes the cable: the sample clock and the link thread
-        self.lock = threading.Lock()
         self.pty: Optional[Pty] = None
         self.host = False
         self.hands: queue.Queue = queue.Queue()
@@ -250,16 +251,13 @@ class Emulator:
         self.emit(name, **data)
 
     def plug(self) -> None:
-        with self.lock:
-            self.pty = Pty(self.args.link)
-            self.unplugged_at = None
-            self.host = False
+        self.pty = Pty(self.args.link)
+        self.unplugged_at = None
+        self.host = False
         self.emit('plugged', pty=self.pty.path, link=self.args.link or '')
 
     def unplug(self) -> None:
-        with self.lock:
-            if self.pty is None:
-                return
+        if self.pty is not None:
             self.pty.close()
             self.pty = None
             self.set_host(False)
@@ -291,50 +289,24 @@ class Emulator:
             return
         c.dropped_tx += len(data) - n
 
-    def serve_link(self) -> None:
-        """The link thread (the UART's receive interrupt): the host's bytes into the core as they
-        come, its answers out.  The sample clock never polls or reads the pty, so a delivery the
-        kernel has not made yet holds up this thread only, never a sample instant."""
-        h = self.rig.sample_period
-        while not self.stop:
-            pty = self.pty
-            if pty is None:
-                time.sleep(h)
-                continue
-            ev = pty.poll(0.05)
-            if ev & (select.POLLHUP | select.POLLERR | select.POLLNVAL):
-                with self.lock:                 # no host has the port open (or it was unplugged)
-                    if self.pty is pty:
-                        self.set_host(False)
-                time.sleep(h)                   # a master without a host polls ready at once
-                continue
-            if not self.host:
-                with self.lock:
-                    if self.pty is pty:
-                        self.set_host(True)
-            if ev & select.POLLIN:
-                self.read(pty)
-
-    def read(self, pty: Pty) -> None:
-        """What the host sent on ``pty``, to the core; nothing once that cable is unplugged."""
-        while not self.stop:
+    def read(self) -> None:
+        if self.pty is None or not self.host:
+            return
+        while True:
             try:
-                data = os.read(pty.master, 4096)
+                data = os.read(self.pty.master, 4096)
             except (BlockingIOError, InterruptedError):
                 return
             except OSError as exc:
-                if exc.errno in (errno.EIO, errno.EBADF):   # the host closed the port; unplugged
+                if exc.errno == errno.EIO:      # the host closed the port
                     return
                 raise
             if not data:
                 return
-            with self.lock:
-                if self.pty is not pty:         # unplugged meanwhile: the bytes are lost on the cable
-                    return
-                held = self.core.cmd_sample
-                self.write(self.core.receive(data, self.now()))
-                if self.core.cmd_sample not in (held, P.NO_SAMPLE):
-                    self.command_taken(self.core.cmd_sample)
+            held = self.core.cmd_sample
+            self.write(self.core.receive(data, self.now()))
+            if self.core.cmd_sample not in (held, P.NO_SAMPLE):
+                self.command_taken(self.core.cmd_sample)
 
     def command_taken(self, sample: int) -> None:
         """A new command answering ``sample`` is held: its latency since the sample went out."""
@@ -388,10 +360,6 @@ class Emulator:
             self.emit('hand', action='let go')
 
     def status(self) -> None:
-        with self.lock:                         # the link thread may be in the core
-            self._status()
-
-    def _status(self) -> None:
         c, s = self.core, self.plant.state
         pc, mc = c.counts()
         e = self.counters
@@ -406,9 +374,23 @@ class Emulator:
                   connected=self.pty is not None, late_commands=e.late_commands,
                   cmd_latency=self.latency.summary())
 
+    def serve_until(self, deadline: float) -> None:
+        """Take the host's bytes (commands) until the sample instant ``deadline`` (monotonic)."""
+        while not (self.stop or self.want_unplug):
+            delay = deadline - time.monotonic()
+            if delay <= 0:
+                return
+            if self.pty is None or not self.host:
+                time.sleep(delay)           # nothing to serve (a master without a host polls
+                return                      # ready at once: no busy loop at real-time priority)
+            ev = self.pty.poll(delay)
+            if ev & select.POLLIN:
+                self.read()
+            if ev & ~select.POLLIN:         # hang-up or error: the host is gone (never spin on it)
+                self.set_host(False)
+
     def sample(self, deadline: float) -> None:
-        """The sample instant: late-instant accounting, one SAMPLE (the link thread has given the
-        core the host's bytes that came before it)."""
+        """The sample instant: late-instant accounting, the host's bytes, one SAMPLE."""
         late = time.monotonic() - deadline
         e = self.counters
         h = self.rig.sample_period
@@ -417,17 +399,19 @@ class Emulator:
             e.stalls += not self.was_late
             e.max_late_ms = max(e.max_late_ms, late * 1e3)
         self.was_late = late > h
+        if self.pty is not None:
+            self.set_host(self.pty.host_present())
+        self.read()
         # PROTOCOL.md, "Device behaviour", the order within a sample period: watchdog check ->
         # the held command drives the plant over the period -> the encoders are read -> SAMPLE
-        with self.lock:
-            now = self.now()
-            u_milli = self.core.tick_begin(now)
-            self.plant.step(u_milli / P.U_SCALE)
-            data = self.core.tick_end(now, *self.plant.counts())
-            self.sent[self.core.k % SENT_RING] = time.monotonic()
-            if self.trace is not None:
-                self.trace('dev.tx', self.core.k)
-            self.write(data)
+        now = self.now()
+        u_milli = self.core.tick_begin(now)
+        self.plant.step(u_milli / P.U_SCALE)
+        data = self.core.tick_end(now, *self.plant.counts())
+        self.sent[self.core.k % SENT_RING] = time.monotonic()
+        if self.trace is not None:
+            self.trace('dev.tx', self.core.k)
+        self.write(data)
 
     def cable(self, unplug_at: float) -> float:
         """SIGUSR1/SIGUSR2 (or the test aids' times): unplug, replug. Returns the next unplug time."""
@@ -454,16 +438,11 @@ class Emulator:
         k = 0
         next_status = a.status_period if a.status_period > 0 else math.inf
         unplug_at = a.unplug_after if a.unplug_after > 0 else math.inf
-        # created after the scheduling was set: the link thread has the sample clock's priority
-        link = threading.Thread(target=self.serve_link, name='emulator-link', daemon=True)
-        link.start()
         try:
             while not self.stop:
                 unplug_at = self.cable(unplug_at)
                 deadline = start + (k + 1) * h
-                delay = deadline - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)           # clock_nanosleep: to the microsecond
+                self.serve_until(deadline)
                 if self.stop:
                     break
                 if self.want_unplug:
@@ -479,8 +458,6 @@ class Emulator:
                 if a.duration > 0 and k * h >= a.duration:
                     break
         finally:
-            self.stop = True
-            link.join(1.0)
             self.status()
             if self.pty is not None:
                 self.pty.close()
