@@ -59,9 +59,9 @@ def _record(argv) -> int:
                         'deterministic order: two lockstep runs give the same bag (./rwpend up '
                         '--lockstep --record sets it; rwpend_bag.logtime)')
     p.add_argument('--rt-priority', type=int, default=None, metavar='N',
-                   help='SCHED_FIFO priority of the recorder (1-99; 0: ordinary scheduling). Default: '
-                        'where permitted, 10 below the nodes\' real-time priority (./rwpend node and up: '
-                        '50), so nodes at real-time priority cannot starve it; 0 with --sim-time')
+                   help='SCHED_FIFO priority of the recorder (1-99; 0: ordinary scheduling; default: '
+                        'RWPEND_RT_PRIORITY, which ./rwpend up sets, else ordinary). Beside nodes at '
+                        'real-time priority 50 in real time, 40 keeps it ahead of every ordinary process')
     p.add_argument('topics', nargs='*', help='topics to record')
     a = p.parse_args(argv)
     if a.rt_priority is not None and not 0 <= a.rt_priority <= 99:
@@ -85,31 +85,10 @@ def _record(argv) -> int:
             validate_full_topic_name(progress)
         except InvalidTopicNameException as exc:
             return _usage_error(p.prog, f'--progress: invalid topic name {a.progress!r} ({exc})')
-    prio, why = recorder_priority(a.rt_priority, a.sim_time, os.environ)
-    if prio is not None:
-        os.environ['RWPEND_RT_PRIORITY'] = str(prio)     # taken by the recorder at its start
-    print(f'{p.prog}: {why}', file=sys.stderr, flush=True)
+    if a.rt_priority is not None:
+        os.environ['RWPEND_RT_PRIORITY'] = str(a.rt_priority)   # taken by the recorder at its start
     from .recorder_node import run_recorder
     return run_recorder(str(out), topics, a.all, progress, a.sim_time)
-
-
-def recorder_priority(given: int | None, sim_time: bool, environ) -> tuple[int | None, str]:
-    """The recorder's SCHED_FIFO priority (None: leave the environment's ``RWPEND_RT_PRIORITY``,
-    which ./rwpend up sets for its recorder), and why. Nodes started alone take real-time
-    priority (``./rwpend node``: thread_priority 50); a recorder at ordinary priority beside them
-    lost stretches of samples on a busy machine, so it takes RECORDER_BELOW under theirs."""
-    from rwpend_ros.sched import DEFAULT_RT_PRIORITY, RECORDER_BELOW, realtime_permitted
-    if given is not None:
-        return given, (f'real-time priority {given} (given)' if given else 'ordinary scheduling (given)')
-    if environ.get('RWPEND_RT_PRIORITY', '').strip():
-        return None, f'real-time priority {environ["RWPEND_RT_PRIORITY"].strip()} (RWPEND_RT_PRIORITY)'
-    if sim_time:
-        return 0, 'ordinary scheduling (--sim-time: a lockstep run)'
-    prio = DEFAULT_RT_PRIORITY - RECORDER_BELOW
-    ok, reason = realtime_permitted(prio)
-    if not ok:
-        return 0, f'ordinary scheduling: real-time priority not permitted here ({reason})'
-    return prio, f'real-time priority {prio} (where permitted; --rt-priority 0 to turn it off)'
 
 
 # ------------------------------------------------------------------ info

@@ -53,16 +53,3 @@ def test_the_callback_hands_its_time_to_the_writer(recorder, monkeypatch):
         receive(b'm')
     assert got == [100, 90, 90, 200]
 
-
-def test_the_recorders_priority():
-    """``rwpend record`` alone: 10 below the nodes' real-time priority where permitted; what is
-    given, or the environment ./rwpend up sets, wins; a lockstep recorder stays ordinary."""
-    from rwpend_bag.cli import recorder_priority
-    from rwpend_ros.sched import DEFAULT_RT_PRIORITY, RECORDER_BELOW, realtime_permitted
-    assert recorder_priority(0, False, {})[0] == 0
-    assert recorder_priority(30, True, {'RWPEND_RT_PRIORITY': '40'})[0] == 30
-    assert recorder_priority(None, False, {'RWPEND_RT_PRIORITY': '40'})[0] is None
-    assert recorder_priority(None, True, {})[0] == 0
-    prio, why = recorder_priority(None, False, {})
-    ok, _ = realtime_permitted(DEFAULT_RT_PRIORITY - RECORDER_BELOW)
-    assert prio == (DEFAULT_RT_PRIORITY - RECORDER_BELOW if ok else 0), why

@@ -410,10 +410,6 @@ def _apply_scheduling(stack: Stack, specs: list[NodeSpec]) -> None:
             # recorder runs at the loop's priority
             below = s.name == 'recorder' and not stack.lockstep
             s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - RECORDER_BELOW) if below else prio)
-    else:
-        for s in specs:
-            if s.module == 'rwpend_bag.cli':    # ordinary, as every process of this run
-                s.args = [*s.args, '--rt-priority', '0']
     if stack.cpu_latency is not None and stack.cpu_latency < 0:
         raise ValueError(f'--cpu-latency must be >= 0 (µs), got {stack.cpu_latency}')
     check_pins(stack.pins, [s.name for s in specs])
