@@ -286,12 +286,16 @@ def fit_dynamics(base, pulses: list[Record], points: tuple, fixed: dict) -> FitR
 
 
 # ------------------------------------------------------------------ stiction
+def first_turn_torques(ramps: list[Record]) -> list[float]:
+    """|u| at the sample each ramp's rotor count first changed."""
+    return [abs(float(rec.u[int(np.nonzero(rec.mc != rec.mc[0])[0][0])])) for rec in ramps]
+
+
 def breakaway_guess(base, ramps: list[Record]) -> float:
     """The applied torque one amplifier step below where each ramp's rotor count first moved
     (the rotor lets go some ms before it has turned half a count), mean over the ramps."""
     q = base.u_max / base.pwm_steps if base.pwm_steps else 0.0
-    levels = [abs(float(rec.u[int(np.nonzero(rec.mc != rec.mc[0])[0][0])])) - q for rec in ramps]
-    return float(np.mean(levels))
+    return float(np.mean([u - q for u in first_turn_torques(ramps)]))
 
 
 def breakaway_profile(rig, rec: Record, grid: np.ndarray) -> np.ndarray:

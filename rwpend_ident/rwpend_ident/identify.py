@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from .estimate import (DYNAMICS, breakaway_guess, fit_breakaway, fit_dynamics, fit_swing, model_rig,
+from .estimate import (DYNAMICS, breakaway_guess, first_turn_torques, fit_breakaway, fit_dynamics, fit_swing, model_rig,
                        with_initial_state)
 from .fit import FitResult, derived, nrmse_fit
 from .models import IDENTIFIED, UNITS, plant_response, rig_from_model
@@ -108,7 +108,7 @@ def analyse(base, data: dict, speeds: Speeds, names: list[str], log=lambda s: No
     swing = fit_swing(base, data['swing'])
     records = [response(n, base, data[n], first_input(n, data[n])) for n in names if n.startswith(('pulse', 'step'))]
     points = hold_means('friction', base, data['friction'], speeds.schedule()[2])
-    stiction = ramps('stiction', base, data['stiction'])
+    stiction = ramps('stiction', base, data['stiction'], log=log)
     start = [swing['wp2'], swing['damping'], base.count_angle, base.sample_period]
     records = [with_initial_state(r, *start) for r in records]
     stiction = [with_initial_state(r, *start) for r in stiction]
@@ -116,7 +116,8 @@ def analyse(base, data: dict, speeds: Speeds, names: list[str], log=lambda s: No
     log(f'  fitting {len(records)} pulses and steps with {len(points[0])} friction-curve points jointly '
         '(Exp. 3, 8-9) ...')
     dyn = fit_dynamics(base, records, points, fixed)
-    log('  fitting the stiction (torque ramps) ...')
+    log('  fitting the stiction (torque ramps): the rotor first turned at |u| = '
+        + ', '.join(f'{u:.3f}' for u in first_turn_torques(stiction)) + ' ...')
     brk = fit_breakaway(model_rig(base, dyn.x, fixed), stiction)
     if abs(brk.x[0] - fixed['breakaway']) > brk.half[0]:   # the pulses let go later or sooner: again
         fixed['breakaway'] = float(brk.x[0])

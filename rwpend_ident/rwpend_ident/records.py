@@ -17,6 +17,11 @@ from rwpend_model.plant import Plant
 from .checks import delivery_problem, Rest, direction_problem, rest_problem
 
 
+#: a ramp's rotor that turns before the command reached this many amplifier steps (u_max/pwm_steps,
+#: Section 2.5) was not stuck when the ramp began (``ramps``)
+STUCK_STEPS = 3
+
+
 class IdentError(Exception):
     """The identification cannot go on: the reason (for the student), nothing else is changed."""
 
@@ -133,28 +138,42 @@ def response(name: str, rig, d, k0: int, before: float = 0.02, after: float = 0.
     return Record(name, start, u[start:end].copy(), d.pc[start:end].copy(), d.mc[start:end].copy(), pre)
 
 
-def ramps(name: str, rig, d, gap: float = 0.2, after: float = 0.1, lead: float = 0.15) -> list[Record]:
+def ramps(name: str, rig, d, gap: float = 0.2, after: float = 0.1, lead: float = 0.15,
+          log=lambda s: None) -> list[Record]:
     """The torque ramps of the stiction run (stretches of nonzero command separated by at least
     ``gap`` s of u = 0), each checked to start from rest, each from ``lead`` s before the rotor first
     moved until ``after`` s after the command went back to 0; ``pre``: the pendulum counts from the
     rest window to the record start (while the rotor sticks the motor torque is internal: the
-    pendulum just swings freely)."""
+    pendulum just swings freely).  A ramp whose rotor count changed before the command reached
+    ``STUCK_STEPS`` amplifier steps was not a break-away from stuck (the rotor was creeping, or a
+    count flickered): it is left out and said through ``log``; IdentError when no ramp is left."""
     u = commands(name, d)
     h = rig.sample_period
+    q = rig.u_max / rig.pwm_steps if rig.pwm_steps else 0.01
     on = np.nonzero(u != 0)[0]
     if not on.size:
         raise IdentError(f'{name}: the command stayed 0 (the step never started)')
     breaks = np.nonzero(np.diff(on) > gap / h)[0]
-    out = []
+    out, early = [], []
     for a, b in zip(np.r_[on[0], on[breaks + 1]], np.r_[on[breaks], on[-1]] + 1):
         check_rest_before(name, rig, d, int(a))
         moved = np.nonzero(d.mc[a:b] != d.mc[a])[0]
         if not moved.size:
             raise IdentError(f'{name}: the rotor did not break away during the ramp at t = {a * h:.2f} s')
+        at = abs(float(u[a + moved[0]]))
+        if at < STUCK_STEPS * q:
+            early.append(f't = {a * h:.2f} s (|u| = {at:.3g})')
+            continue
         s0 = max(int(a) - int(round(0.02 / h)), int(a + moved[0]) - int(round(lead / h)))
         s1 = min(d.n, int(b) + int(round(after / h)))
         pre = d.pc[max(0, int(a) - int(round(Rest().still_s / h))):s0].copy()
         out.append(Record(name, s0, u[s0:s1].copy(), d.pc[s0:s1].copy(), d.mc[s0:s1].copy(), pre))
+    if early:
+        why = (f'the rotor count changed before the torque reached {STUCK_STEPS} amplifier steps in the '
+               f'ramp at {", ".join(early)}: the rotor was not stuck when it began')
+        if not out:
+            raise IdentError(f'{name}: {why}')
+        log(f'  {name}: {len(early)} of {len(early) + len(out)} ramps left out, {why}')
     return out
 
 

@@ -280,3 +280,21 @@ def test_a_swing_with_samples_missing_says_how_many():
     d.pc[1000:1204] = np.nan
     with pytest.raises(IdentError, match='swing: 204 encoder samples missing in the recording'):
         E.fit_swing(TRUTH, d)
+
+
+def test_a_ramp_whose_rotor_was_not_stuck_is_left_out_and_said():
+    """A rotor count that changes as a ramp begins (|u| under 3 amplifier steps) is no break-away:
+    that ramp is left out and said, the other one kept; with none left, the reason."""
+    d = ramp_run()
+    u = commands('stiction', d)
+    on = np.nonzero(u != 0)[0]
+    second = int(on[np.nonzero(np.diff(on) > 0.2 / H)[0][0] + 1])
+    d.mc[second + 2:] += 1.0                       # the second ramp's count flickers at its start
+    said = []
+    kept = ramps('stiction', BASE, d, log=said.append)
+    assert len(kept) == 1 and kept[0].k0 < second
+    assert len(said) == 1 and '1 of 2 ramps left out' in said[0] and 'not stuck' in said[0]
+    assert E.first_turn_torques(kept)[0] > 1.5     # the kept ramp broke away near the truth's 1.6
+    d.mc[on[0] + 2:] += 1.0                        # the first one too: nothing left to fit
+    with pytest.raises(IdentError, match='not stuck when it began'):
+        ramps('stiction', BASE, d)
