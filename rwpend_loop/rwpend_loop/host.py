@@ -302,6 +302,8 @@ class Host:
             return False
         was = sim.core.timed_out
         tick = loop.step(behind=behind, t=stamp_ns * 1e-9)
+        if tick.taken and sim.trace is not None:     # the plant holds command k from now (the
+            sim.trace('sim.rx', tick.reading.seq)     # external controller's: sim_node's callback)
         if tick.late:
             self._after_interval(was)
         self._publish(tick, stamp_ns)

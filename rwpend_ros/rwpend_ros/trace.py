@@ -23,6 +23,7 @@ each collection of Python's cyclic garbage collector.
 from __future__ import annotations
 
 import os
+import statistics
 import time
 from array import array
 from pathlib import Path
@@ -84,8 +85,9 @@ def load(directory: str | os.PathLike) -> dict[str, dict[int, int]]:
 
 
 def stages(marks: dict[str, dict[int, int]], order=ORDER, seqs=None) -> dict[str, list[float]]:
-    """Microseconds between consecutive events of ``order`` (those present), per seq that has
-    all of them, plus ``total`` (first to last). ``seqs`` restricts the seqs considered."""
+    """Microseconds between consecutive events of ``order`` (those present, sorted by when they
+    happen: the median time after the first), per seq that has all of them, plus ``total``
+    (first to last). ``seqs`` restricts the seqs considered."""
     present = [e for e in order if e in marks]
     if len(present) < 2:
         return {}
@@ -94,6 +96,9 @@ def stages(marks: dict[str, dict[int, int]], order=ORDER, seqs=None) -> dict[str
         common &= set(marks[e])
     if seqs is not None:
         common &= set(seqs)
+    if common:      # in the order they happen (in one loop the write comes before the publishing)
+        first = marks[present[0]]
+        present.sort(key=lambda e: statistics.median(marks[e][s] - first[s] for s in common))
     out: dict[str, list[float]] = {f'{a} -> {b}': [] for a, b in zip(present, present[1:])}
     out['total'] = []
     for s in sorted(common):

@@ -55,3 +55,15 @@ def test_bench_trace_metrics(tmp_path):
     assert m['stages_us']['sim.pub -> est.rx']['p50'] == 100.0
     assert trace_metrics(tmp_path, window_seq=[0, 1])['plant_rx_late_samples'] == 0
     assert 'trace_error' in trace_metrics(tmp_path / 'nothing')
+
+
+def test_stages_in_the_order_they_happen():
+    """In one loop the command is written (sim.rx) before the sample is published: the stages
+    follow the times, not the DDS relay's order."""
+    marks = {'sim.tick': {0: 0, 1: 1_000_000}, 'sim.rx': {0: 80_000, 1: 1_070_000},
+             'sim.pub': {0: 100_000, 1: 1_090_000}, 'est.pub': {0: 110_000, 1: 1_100_000},
+             'ctl.pub': {0: 120_000, 1: 1_110_000}}
+    st = trace.stages(marks)
+    assert list(st) == ['sim.tick -> sim.rx', 'sim.rx -> sim.pub', 'sim.pub -> est.pub', 'est.pub -> ctl.pub',
+                        'total']
+    assert st['sim.tick -> sim.rx'] == [80.0, 70.0] and st['total'] == [120.0, 110.0]
