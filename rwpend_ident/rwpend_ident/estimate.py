@@ -25,7 +25,7 @@ from rwpend_lab import measure as M
 
 from .fit import FitError, FitResult, fit, linear_fit
 from .models import free_swing, plant_response, rig_from_model, swing_state
-from .records import IdentError, Record
+from .records import IdentError, Record, amplifier_step
 
 #: Standard deviation of the quantization error of one encoder reading (counts).
 QUANT = 1.0 / math.sqrt(12.0)
@@ -294,7 +294,7 @@ def first_turn_torques(ramps: list[Record]) -> list[float]:
 def breakaway_guess(base, ramps: list[Record]) -> float:
     """The applied torque one amplifier step below where each ramp's rotor count first moved
     (the rotor lets go some ms before it has turned half a count), mean over the ramps."""
-    q = base.u_max / base.pwm_steps if base.pwm_steps else 0.0
+    q = amplifier_step(base)
     return float(np.mean([u - q for u in first_turn_torques(ramps)]))
 
 
@@ -312,7 +312,7 @@ def fit_breakaway(rig, ramps: list[Record]) -> FitResult:
     within 10 % of its minimum; the estimate is the mean of the ramps, its 95 % half-width the larger
     of half an amplifier step and the ramps' spread (which also covers a ramp that started with the
     pendulum swinging by a count: near a step that decides the sample the rotor lets go on)."""
-    q = rig.u_max / rig.pwm_steps if rig.pwm_steps else 0.01
+    q = amplifier_step(rig) or 0.01
     f0 = rig.friction_breakaway
     grid = np.arange(f0 - 2 * q, f0 + 2 * q + 1e-9, q / 4)
     per_ramp = []

@@ -22,6 +22,11 @@ from .checks import delivery_problem, Rest, direction_problem, rest_problem
 STUCK_STEPS = 3
 
 
+def amplifier_step(rig) -> float:
+    """The amplifier's command step u_max / pwm_steps (Section 2.5); 0 without quantization."""
+    return rig.u_max / rig.pwm_steps if rig.pwm_steps else 0.0
+
+
 class IdentError(Exception):
     """The identification cannot go on: the reason (for the student), nothing else is changed."""
 
@@ -149,7 +154,7 @@ def ramps(name: str, rig, d, gap: float = 0.2, after: float = 0.1, lead: float =
     count flickered): it is left out and said through ``log``; IdentError when no ramp is left."""
     u = commands(name, d)
     h = rig.sample_period
-    q = rig.u_max / rig.pwm_steps if rig.pwm_steps else 0.01
+    q = amplifier_step(rig) or 0.01
     on = np.nonzero(u != 0)[0]
     if not on.size:
         raise IdentError(f'{name}: the command stayed 0 (the step never started)')
