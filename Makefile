@@ -17,16 +17,15 @@ demo: setup
 	@./rwpend demo
 
 # the unit and loop tiers on 2 workers (pytest-xdist: each test alone in its worker's process, own
-# domain ids and tmp dirs), then the tiers that start processes on 2 workers too (a file's tests on
-# one worker: their shared fixtures start once; each worker its own slice of the domain ids), then
-# the tests marked alone one at a time (a real-time run whose recording must be complete); fails
-# if any part fails
+# domain ids and tmp dirs), then the tiers that start processes one at a time (their timing margins
+# are for one test at a time on a loaded 2-core host: two at a time, those tiers took 9 min instead
+# of 15, but in 1 of 3 runs a real-time test missed its margin and the identification through the
+# emulated rig recorded incomplete runs); fails if either part fails
 test: setup-browser setup-cluster
 	@./rwpend exec python -m pytest -m "unit or loop" -n 2; fast=$$?; \
-	./rwpend exec python -m pytest -m "not (unit or loop) and not alone" -n 2 --dist loadfile; slow=$$?; \
-	./rwpend exec python -m pytest -m "alone"; alone=$$?; \
-	echo "make test: unit + loop exit $$fast, system + network + browser exit $$slow, alone exit $$alone"; \
-	[ $$fast -eq 0 ] && [ $$slow -eq 0 ] && [ $$alone -eq 0 ]
+	./rwpend exec python -m pytest -m "not (unit or loop)"; slow=$$?; \
+	echo "make test: unit + loop exit $$fast, system + network + browser exit $$slow"; \
+	[ $$fast -eq 0 ] && [ $$slow -eq 0 ]
 
 # the tiers (pytest markers, given by the root conftest.py): unit, loop, system, network, browser
 # the quick check: pure code and the loop in one process, no process of the stack started

@@ -28,10 +28,6 @@ from emulated_hand import RWPEND, run_with_hand
 from rwpend_ident.rigfile import example_rig_file
 from rwpend_model.rig import load_rig_file
 
-#: real time through the emulator with every sample recorded: beside another test on 2 cores the
-#: recording missed samples (452 of a run at a load of 7) and the identification stopped (xfail)
-pytestmark = pytest.mark.alone
-
 HEAVY = str(example_rig_file())
 HAND = {'Let the pendulum hang still': 'steady 0.5', 'Lift the pendulum to about': 'lift 20 1.5',
         'Let go of the pendulum now': ''}
