@@ -289,8 +289,14 @@ def plan(stack: Stack) -> Plan:
         specs.append(_recorder_spec(stack, plant_spec))
     if stack.layout == 'loop':
         specs = loop_layout(specs, stack)
-    elif stack.layout == 'control':
-        specs = control_layout(specs)
+    else:
+        if stack.record and stack.controller:
+            # the controller in another process than the plant: the plant's first sample waits
+            # for the recorder of command too (it subscribes once it has seen the controller's
+            # publisher), or the bag may begin its commands seconds after its samples
+            plant_spec.params['start.command_subscribers'] = 1
+        if stack.layout == 'control':
+            specs = control_layout(specs)
     _apply_scheduling(stack, specs)
     if stack.console is not None:   # not a loop process: its own priority, no pinning
         specs.append(console_spec(stack, plant_spec))

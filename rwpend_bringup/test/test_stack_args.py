@@ -309,3 +309,21 @@ def test_the_loop_layout_is_the_default_on_the_rig(monkeypatch, tmp_path):
     # split across hosts, and the other layouts on request
     assert set(defaults_of('--plant', 'serial:/dev/null', '--only', 'driver')[1]) == {'driver'}
     assert defaults_of('--plant', 'serial:/dev/null', '--composed', 'control')[0].layout == 'control'
+
+
+@pytest.mark.parametrize('plant', ['sim', 'serial:/dev/null'])
+def test_a_plant_without_the_controller_waits_for_the_recorder_of_command(tmp_path, plant):
+    """The controller in another process: the recorder subscribes to command only once it has
+    seen the controller's publisher, which may be seconds after it subscribed to the samples (a
+    bag whose commands began 2.9 s after its samples); the plant's first sample waits for it.
+    The loop's own process records the commands it writes: nothing to wait for there."""
+    bag = str(tmp_path / 'bag')
+    name = 'sim' if plant == 'sim' else 'driver'
+    for layout in ('control', 'none'):
+        s = specs_of('--plant', plant, '--composed', layout, '--record', bag)
+        assert s[name].params['start.command_subscribers'] == 1
+        assert 'start.command_subscribers' not in specs_of('--plant', plant, '--composed', layout)[name].params
+    assert 'start.command_subscribers' not in specs_of('--plant', plant, '--composed', 'control', '--record', bag,
+                                                       '--no-controller')[name].params
+    s = specs_of('--plant', plant, '--composed', 'loop', '--record', bag)
+    assert 'start.command_subscribers' not in s['loop'].node_params[name]

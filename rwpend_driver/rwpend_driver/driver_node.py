@@ -100,6 +100,10 @@ PARAMS = [
     RO('start.encoders_subscribers', 1, 'subscribers of encoders (the estimator, a recorder) to wait '
        'for before the first sample is published: the device streams from the handshake, the run '
        'starts when everyone listens, so a bag misses nothing of it', low=0),
+    RO('start.command_subscribers', 0, 'subscribers of command besides the driver to wait for before '
+       'the first sample is published: the recorder of a stack whose controller runs in another '
+       'process (./rwpend up --record sets 1), so that the bag has the commands from the first sample',
+       low=0),
     RO('frame_id', 'rwpend', 'frame_id of the published headers'),
     RO('diagnostics_period', 0.5, 's between /diagnostics messages', low=0.0, low_open=True),
     RO('health_log_period', 10.0, 's between two warnings of the same kind about the link (the first '
@@ -357,7 +361,9 @@ class DriverNode(LifecycleNode):
         encoders (said in the log); a wait of more than 5 s is said once, with who is missing."""
         need = max(0, self.p['start.encoders_subscribers'] - self.listeners_here)
         have = self.pub_enc.get_subscription_count()
-        if have >= need:
+        need_cmd = self.p['start.command_subscribers']
+        have_cmd = self.count_subscribers(self.resolve_topic_name('command')) - (self.sub_cmd is not None)
+        if have >= need and have_cmd >= need_cmd:
             self.first_published = seq
             self.get_logger().info(f'{have} subscriber(s) of encoders: publishing from sample {seq} '
                                    f'({self.samples_before_start} read before, not published)')
@@ -365,7 +371,9 @@ class DriverNode(LifecycleNode):
         if not self.waiting_warned and time.monotonic() - self.waiting_since > 5.0:
             self.waiting_warned = True
             self.get_logger().warning(f'waiting for {need} subscriber(s) of encoders (the estimator, a '
-                                      f'recorder), {have} so far: no sample is published until then')
+                                      f'recorder), {have} so far, and {need_cmd} of command besides the '
+                                      f'driver (a recorder), {have_cmd} so far: no sample is published '
+                                      'until then')
         return False
 
     def on_command_raw(self, data: bytes) -> None:

@@ -239,6 +239,9 @@ class Host:
         # start.encoders_subscribers counts the estimator (here, when hosted) and a recorder
         n_enc = max(0, sim.p['start.encoders_subscribers'] - (self.est is not None))
         n_true = sim.p['start.true_state_subscribers']
+        # a recorder of command (the controller in another process), besides the simulator's own
+        n_cmd = sim.p['start.command_subscribers']
+        cmd_topic = sim.resolve_topic_name('command')
         # lockstep: start.state_subscribers counts the controller (here, when hosted) and the
         # subscribers of state outside (a console whose page must be open before sample 0)
         n_state = max(0, sim.p['start.state_subscribers'] - (self.ctrl is not None)) if sim.lockstep else 0
@@ -251,6 +254,8 @@ class Host:
                 missing.append(f'{n_true} subscribers of sim/true_state')
             if sim.count_subscribers(sim.resolve_topic_name('state')) < n_state:
                 missing.append(f'{n_state} subscribers of state')
+            if sim.count_subscribers(cmd_topic) - (sim.sub_cmd is not None) < n_cmd:
+                missing.append(f'{n_cmd} subscribers of command besides the simulator')
             if self.ctrl is None and sim.lockstep:   # (real time: the plant runs without one)
                 if sim.count_publishers(sim.resolve_topic_name('command')) == 0:
                     missing.append('a publisher of command')
@@ -267,7 +272,7 @@ class Host:
                     sim.publish_diagnostics()
             time.sleep(0.02)
         sim.waiting_for = ''
-        outside = n_enc or n_true or n_state or self.est is None or self.ctrl is None or sim.recorder_window
+        outside = n_enc or n_true or n_state or n_cmd or self.est is None or self.ctrl is None or sim.recorder_window
         if outside or not sim.lockstep:
             time.sleep(sim.p['start.delay'])
         sim.wall_start = time.monotonic()
