@@ -293,8 +293,9 @@ def plan(stack: Stack) -> Plan:
         if stack.record and stack.controller:
             # the controller in another process than the plant: the plant's first sample waits
             # for the recorder of command too (it subscribes once it has seen the controller's
-            # publisher), or the bag may begin its commands seconds after its samples
-            plant_spec.params['start.command_subscribers'] = 1
+            # publisher), or the bag may begin its commands seconds after its samples; a
+            # separate estimator subscribes to command as well
+            plant_spec.params['start.command_subscribers'] = 2 if stack.layout == 'none' else 1
         if stack.layout == 'control':
             specs = control_layout(specs)
     _apply_scheduling(stack, specs)

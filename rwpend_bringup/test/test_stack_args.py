@@ -319,9 +319,9 @@ def test_a_plant_without_the_controller_waits_for_the_recorder_of_command(tmp_pa
     The loop's own process records the commands it writes: nothing to wait for there."""
     bag = str(tmp_path / 'bag')
     name = 'sim' if plant == 'sim' else 'driver'
-    for layout in ('control', 'none'):
+    for layout, n in (('control', 1), ('none', 2)):     # none: the estimator subscribes to command too
         s = specs_of('--plant', plant, '--composed', layout, '--record', bag)
-        assert s[name].params['start.command_subscribers'] == 1
+        assert s[name].params['start.command_subscribers'] == n
         assert 'start.command_subscribers' not in specs_of('--plant', plant, '--composed', layout)[name].params
     assert 'start.command_subscribers' not in specs_of('--plant', plant, '--composed', 'control', '--record', bag,
                                                        '--no-controller')[name].params

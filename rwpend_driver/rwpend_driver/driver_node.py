@@ -102,8 +102,8 @@ PARAMS = [
        'starts when everyone listens, so a bag misses nothing of it', low=0),
     RO('start.command_subscribers', 0, 'subscribers of command besides the driver to wait for before '
        'the first sample is published: the recorder of a stack whose controller runs in another '
-       'process (./rwpend up --record sets 1), so that the bag has the commands from the first sample',
-       low=0),
+       'process, and a separate estimator (./rwpend up --record sets it), so that the bag has the '
+       'commands from the first sample', low=0),
     RO('frame_id', 'rwpend', 'frame_id of the published headers'),
     RO('diagnostics_period', 0.5, 's between /diagnostics messages', low=0.0, low_open=True),
     RO('health_log_period', 10.0, 's between two warnings of the same kind about the link (the first '

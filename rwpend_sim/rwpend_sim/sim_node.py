@@ -72,8 +72,9 @@ PARAMS = [
     RO('start.true_state_subscribers', 0, 'subscribers of sim/true_state to wait for before sample 0',
        low=0),
     RO('start.command_subscribers', 0, 'subscribers of command besides the simulator to wait for '
-       'before sample 0: the recorder of a stack whose controller runs in another process (./rwpend up '
-       '--record sets 1), so that the bag has the commands from the first sample', low=0),
+       'before sample 0: the recorder of a stack whose controller runs in another process, and a '
+       'separate estimator (./rwpend up --record sets it), so that the bag has the commands from '
+       'the first sample', low=0),
     RO('start.state_subscribers', 0, 'lockstep: subscribers of state (the controller) to wait for '
        'before sample 0', low=0),
     RO('start.first_command_timeout', 10.0, 'lockstep: wall seconds sample 0 waits for its command '
