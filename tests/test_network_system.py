@@ -317,6 +317,12 @@ def graph_of(netlab, host, env) -> dict:
     return json.loads(p.stdout)
 
 
+def estop_state(bag_dir, ns: str) -> bool:
+    """The last e-stop state of rig ``ns`` in its bag (its plant's ``estop/state``)."""
+    from rwpend_bag.analysis import _decode
+    return bool(_decode(read_bag(bag_dir), f'{ns}/estop/state')['data'][-1])
+
+
 def sim_status(bag_dir, ns: str) -> dict:
     return read_run(bag_dir)['diagnostics'][f'{ns}/sim: plant']
 
@@ -380,8 +386,11 @@ def test_three_rigs_separated_by_domain_id_and_namespace(tmp_path, netlab):
     time.sleep(1.0)
     stop_rigs(runs)
     for ns, domain, theta0 in rigs:
-        st = check_rig_heard_only_itself(runs[ns][2], ns, theta0, topics_of_others=False)
-        assert (st['estop'] == 'True') == (ns == '/rig2'), (ns, st['estop'])
+        check_rig_heard_only_itself(runs[ns][2], ns, theta0, topics_of_others=False)
+        # the rig's e-stop as its plant latched it (estop/state: transient local, in the bag
+        # whatever the recorder missed; the simulator's last /diagnostics may predate the e-stop
+        # in a bag that lost most of its messages on a loaded host)
+        assert estop_state(runs[ns][2], ns) == (ns == '/rig2'), ns
 
 
 @pytest.mark.timeout(900)
