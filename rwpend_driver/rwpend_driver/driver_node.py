@@ -362,7 +362,9 @@ class DriverNode(LifecycleNode):
         need = max(0, self.p['start.encoders_subscribers'] - self.listeners_here)
         have = self.pub_enc.get_subscription_count()
         need_cmd = self.p['start.command_subscribers']
-        have_cmd = self.count_subscribers(self.resolve_topic_name('command')) - (self.sub_cmd is not None)
+        # (a graph query: only when asked for, this runs on every sample read while waiting)
+        have_cmd = (self.count_subscribers(self.resolve_topic_name('command')) - (self.sub_cmd is not None)
+                    if need_cmd else 0)
         if have >= need and have_cmd >= need_cmd:
             self.first_published = seq
             self.get_logger().info(f'{have} subscriber(s) of encoders: publishing from sample {seq} '

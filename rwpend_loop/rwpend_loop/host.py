@@ -254,10 +254,10 @@ class Host:
                 missing.append(f'{n_true} subscribers of sim/true_state')
             if sim.count_subscribers(sim.resolve_topic_name('state')) < n_state:
                 missing.append(f'{n_state} subscribers of state')
-            if sim.count_subscribers(cmd_topic) - (sim.sub_cmd is not None) < n_cmd:
+            if n_cmd and sim.count_subscribers(cmd_topic) - (sim.sub_cmd is not None) < n_cmd:
                 missing.append(f'{n_cmd} subscribers of command besides the simulator')
             if self.ctrl is None and sim.lockstep:   # (real time: the plant runs without one)
-                if sim.count_publishers(sim.resolve_topic_name('command')) == 0:
+                if sim.count_publishers(cmd_topic) == 0:
                     missing.append('a publisher of command')
                 if self.est is not None and sim.count_subscribers(sim.resolve_topic_name('state')) == 0:
                     missing.append('a subscriber of state')
