@@ -91,6 +91,26 @@ def delivery_problem(commanded: list, held: list) -> str | None:
             'run it again with less load on this PC')
 
 
+def late_commands_problem(commanded: list, held: list, tol: float = 0.03) -> str | None:
+    """Why a procedure's refusal judged a motor that did not get the commands, or None:
+    ``commanded`` the controller's commands over the window before the refusal, ``held`` what
+    the plant held over the same samples (NaN where the bag has no report; those samples are not
+    counted). A procedure judges the rig by its response to the commands (the wheel did not speed
+    up under a saturated command, the rotor did not break away); when the plant held the command
+    for less than 80 % of the window, the PC fell behind the sample rate (the device holds no
+    command longer than its hold limit, rwpend_driver/PROTOCOL.md) and the verdict says nothing
+    about the rig. ``tol``: control units, the amplifier's step (u_max/pwm_steps) and more."""
+    pairs = [(c, h) for c, h in zip(commanded, held) if c == c and h == h]
+    if len(pairs) < 10:
+        return None
+    got = sum(1 for c, h in pairs if abs(c - h) <= tol + 0.01 * abs(c))
+    if got >= 0.8 * len(pairs):
+        return None
+    return (f'the commands did not reach the motor whole before the refusal: the plant held the commanded '
+            f'u in {got} of {len(pairs)} samples (this PC fell behind the sample rate and the commands came '
+            'late), so the verdict is not the rig\'s; run it again with less load on this PC')
+
+
 def direction_problem(u0: float, d_pendulum: float, d_rotor: float, count: float) -> str | None:
     """Encoder and motor directions from the first torque pulse of sign ``u0``: by (2.15) the
     rotor turns with u (theta_r'' = b_r (u - F)) and the pendulum against it

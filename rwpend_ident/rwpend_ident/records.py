@@ -14,12 +14,15 @@ import numpy as np
 from rwpend_control.status_codes import LOOP_FAULTS
 from rwpend_model.plant import Plant
 
-from .checks import delivery_problem, Rest, direction_problem, rest_problem
+from .checks import delivery_problem, Rest, direction_problem, late_commands_problem, rest_problem
 
 
 #: a ramp's rotor that turns before the command reached this many amplifier steps (u_max/pwm_steps,
 #: Section 2.5) was not stuck when the ramp began (``ramps``)
 STUCK_STEPS = 3
+#: the window before a procedure's refusal whose commands must have reached the motor for the
+#: verdict to be the rig's: the longest a procedure judges (the saturation's 0.3 s) and more
+REFUSAL_WINDOW_S = 0.5
 
 
 def amplifier_step(rig) -> float:
@@ -59,7 +62,20 @@ def refused(name: str, d) -> None:
     if faults:
         t, fault = faults[0]
         reason = fault.split('NotReady: ', 1)[-1]
+        late = _late_before(d, t)
+        if late:
+            raise IdentError(f'{name}: {late} (the procedure refused the step at t = {t:.2f} s: {reason})')
         raise IdentError(f'{name}: the step was refused at t = {t:.2f} s: {reason}')
+
+
+def _late_before(d, t: float, window: float = REFUSAL_WINDOW_S) -> str | None:
+    """:func:`~rwpend_ident.checks.late_commands_problem` over the ``window`` s before a refusal
+    at ``t`` (None when the bag has no report of what the plant held)."""
+    held = getattr(d, 'u_held', None)
+    if held is None or np.all(np.isnan(held)):
+        return None
+    sl = d.window(t - window, t)
+    return late_commands_problem(list(d.u[sl]), list(held[sl]))
 
 
 def commands(name: str, d) -> np.ndarray:

@@ -298,3 +298,33 @@ def test_a_ramp_whose_rotor_was_not_stuck_is_left_out_and_said():
     d.mc[on[0] + 2:] += 1.0                        # the first one too: nothing left to fit
     with pytest.raises(IdentError, match='not stuck when it began'):
         ramps('stiction', BASE, d)
+
+
+# ------------------------------------------------------------------ a refusal judged on commands that came late
+def _refused_at(d: RunData, t: float, held) -> RunData:
+    d.faults = [(t, 4, 'law fault: procedures.py: NotReady: saturation reached at a wheel speed of -199 rad/s')]
+    d.u_held = held
+    return d
+
+
+def test_a_refusal_the_motor_saw_is_the_rigs():
+    from rwpend_ident.records import refused
+    d = run_data(lambda k, p: -10.0 if k >= 200 else 0.0, 1000)
+    with pytest.raises(IdentError, match='friction: the step was refused at t = 0.90 s: saturation reached'):
+        refused('friction', _refused_at(d, 0.9, d.u.copy()))
+
+
+def test_a_refusal_judged_while_the_plant_held_0_for_late_commands_says_the_pc_fell_behind():
+    # the emulated rig's friction run: the device held 0 (hold limit) for half of the saturated
+    # samples, the wheel slowed down, the procedure refused as if the amplifier were too weak
+    from rwpend_ident.records import refused
+    d = run_data(lambda k, p: -10.0 if k >= 200 else 0.0, 1000)
+    held = d.u.copy()
+    held[300::2] = 0.0
+    with pytest.raises(IdentError, match=r'friction: the commands did not reach the motor whole before the '
+                       r'refusal: the plant held the commanded u in 250 of 500 samples .*PC fell behind.*'
+                       r'\(the procedure refused the step at t = 0.90 s: saturation reached'):
+        refused('friction', _refused_at(d, 0.9, held))
+    # a bag without the plant's report: the procedure's verdict as it is
+    with pytest.raises(IdentError, match='the step was refused at t = 0.90 s'):
+        refused('friction', _refused_at(d, 0.9, None))
