@@ -38,7 +38,9 @@ none): :func:`plant_view` builds the same columns from them, and the verdict say
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -59,10 +61,9 @@ def read_run(bag_dir: str | Path) -> dict:
     """The loop topics of a bag as numpy columns (``stamp`` in s; fields a bag lacks are absent),
     the topics' names (``topics``), the last value of every /diagnostics key per status name
     (``diagnostics``) and the recording report (``report``, {} if none) -- read with rosbags."""
-    from rosbags.highlevel import AnyReader
     bag_dir = Path(bag_dir)
     out: dict = {'topics': {}, 'diagnostics': {}}
-    with AnyReader([bag_dir]) as reader:
+    with _rosbags_reader(bag_dir) as reader:
         conns = {}
         for c in reader.connections:
             short = c.msgtype.rsplit('/', 1)[-1]
@@ -93,6 +94,23 @@ def read_run(bag_dir: str | Path) -> dict:
     report = bag_dir / 'recording_report.json'
     out['report'] = json.loads(report.read_text()) if report.exists() else {}
     return out
+
+
+@contextlib.contextmanager
+def _rosbags_reader(bag_dir: Path):
+    """rosbags' AnyReader open on the rosbag2 directory ``bag_dir``. AnyReader takes a path whose
+    name ends in ``.bag`` for a ROS 1 bag; a rosbag2 directory of that name (``up --record
+    run.bag``) is opened through a link without the suffix."""
+    from rosbags.highlevel import AnyReader
+    if bag_dir.suffix != '.bag' or not bag_dir.is_dir():
+        with AnyReader([bag_dir]) as reader:
+            yield reader
+        return
+    with tempfile.TemporaryDirectory(prefix='rwpend-judge-') as tmp:
+        link = Path(tmp) / bag_dir.stem
+        link.symlink_to(bag_dir.resolve(), target_is_directory=True)
+        with AnyReader([link]) as reader:
+            yield reader
 
 
 def wrap(a):

@@ -131,3 +131,19 @@ def test_a_bag_without_the_plant_side_says_so():
     del r['applied']
     v = judge(r)
     assert v.problems == ['neither sim/true_state nor applied with state in the bag: nothing to judge']
+
+
+def test_a_rosbag2_directory_named_like_a_ros1_bag_is_read(tmp_path):
+    # rosbags' AnyReader takes any path ending in .bag for a ROS 1 bag; ``up --record run.bag``
+    # writes a rosbag2 directory of that name
+    import shutil
+    from pathlib import Path
+
+    from rwpend_bag.judge import read_run
+    ref = Path(__file__).resolve().parents[2] / 'bags' / 'reference' / 'swingup_tap'
+    named = tmp_path / 'run.bag'
+    shutil.copytree(ref, named)
+    a, b = read_run(ref), read_run(named)
+    assert a['topics'] == b['topics'] and a['topics']
+    for key in a['topics']:
+        assert all(np.array_equal(a[key][f], b[key][f]) for f in a[key])
