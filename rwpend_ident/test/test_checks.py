@@ -6,7 +6,8 @@ import math
 import pytest
 
 from rwpend_control.user_law import LawError, LawState, load_law
-from rwpend_ident.checks import NotReady, Rest, direction_problem, rest_problem, saturation_problem
+from rwpend_ident.checks import (NotReady, Rest, direction_problem, late_commands_problem, rest_problem,
+                                 saturation_problem)
 from rwpend_model.rig import load_rig
 
 COUNT = 2 * math.pi / 4000
@@ -44,6 +45,17 @@ def test_direction_problem_tells_which_one_is_reversed():
 def test_saturation_problem():
     assert saturation_problem(12.0, 10.0, 0.3, 'x') is None
     assert 'saturation reached at 400 rad/s' in saturation_problem(3.0, 10.0, 0.3, 'at 400 rad/s')
+
+
+def test_late_commands_problem_counts_the_samples_the_plant_held():
+    nan = float('nan')
+    u = [-10.0] * 100
+    assert late_commands_problem(u, [-10.0] * 80 + [0.0] * 20) is None            # 80 %: the rig's verdict
+    assert '79 of 100 samples' in late_commands_problem(u, [-10.0] * 79 + [0.0] * 21)
+    # the amplifier's quantized value is the command held; samples without a report are not counted
+    assert late_commands_problem([3.01] * 50, [3.0] * 50) is None
+    assert late_commands_problem(u, [nan] * 95 + [0.0] * 5) is None                # 5 samples: too few to say
+    assert '0 of 10 samples' in late_commands_problem(u, [nan] * 90 + [0.0] * 10)
 
 
 def _state(t, theta=0.0, theta_dot=0.0, wheel=0.0, rate=0.0):
