@@ -143,28 +143,34 @@ def segment_figures(t: dict) -> dict:
             'upright': round(float(np.sum(x < 0.3)) / n, 4)}
 
 
-#: s after the cut command before the cut is sure to hold (the rules take effect, the last
-#: datagrams in flight arrive): a command timeout before then may be a late sample's
+#: s after the port went down within which the motor is at zero for good (the last datagrams
+#: in flight arrive, the command timeout runs out)
 CUT_TAKES_S = 0.2
 
 
-def cut_reaction(t: dict, t_cut: float, t_restore: float) -> dict:
-    """From the samples of the cut: the newest command the plant took before it went to zero
+def cut_reaction(t: dict, t_pull: float, t_cut: float, t_restore: float) -> dict:
+    """From the samples of the cut (the cable pulled at ``t_pull``, the port down at ``t_cut``,
+    restored at ``t_restore``): the newest command the plant took before it went to zero
     (``last_command``: the sample it answers), the sample instant from which the motor was at
-    zero by the command timeout (``zero_from``: the start of the timeout that holds
-    :data:`CUT_TAKES_S` after the cut; ``sim/true_state`` of sample k reports the command held
-    over [t_k-1, t_k)), the samples between the two, and whether the motor stayed at zero from
-    then until the restore."""
-    held = window(t, t_cut + CUT_TAKES_S, t_restore)
-    if not held['seq'].size or not held['command_timeout'][0]:
+    zero by the command timeout (``zero_from``: the start of the timeout that lasts to the end of
+    the cut; ``sim/true_state`` of sample k reports the command held over [t_k-1, t_k)), the
+    samples between the two, that start's time after the port went down (``cut_to_zero_s``, at
+    most :data:`CUT_TAKES_S`), and whether the motor stayed at zero from then until the
+    restore."""
+    cut = window(t, t_pull, t_restore)
+    if not cut['seq'].size or not cut['command_timeout'][-1]:
         return {'zero_from': None}
-    i = int(np.nonzero(t['seq'] == held['seq'][0])[0][0])
+    # the timeout the cut's last sample is in, back to its start (on a loaded host the loop may
+    # also time out for a moment of its own just before the cut takes effect)
+    i = int(np.nonzero(t['seq'] == cut['seq'][-1])[0][0])
     while i > 0 and t['command_timeout'][i - 1]:
-        i -= 1                                   # back to the start of that timeout
+        i -= 1
     k0 = int(t['seq'][i])
     before = t['command_seq'][(t['seq'] <= k0)]
     last = int(before[before >= 0].max())
+    held = window(t, float(t['stamp'][i]), t_restore)
     out = {'last_command': last, 'zero_from': k0 - 1, 'samples_to_zero': k0 - 1 - last,
+           'cut_to_zero_s': round(float(t['stamp'][i]) - t_cut, 3),
            'zero_until_restore': bool(np.all(held['command_timeout'] | (held['u_commanded'] == 0.0)))}
     # after the restore: the first sample driven by a fresh command, and the first of 1 s upright
     later = t['stamp'] >= t_restore
@@ -193,8 +199,9 @@ def test_link_cut_zeroes_the_motor_and_the_stack_recovers(tmp_path, netlab, lab_
     run.start()
     assert run.wait_for_log(1, 'auto/swingup -> auto/catch', timeout=120), run.log_text(1)[-3000:]
     time.sleep(3.0)
-    t_cut = time.time()
+    t_pull = time.time()
     netlab.cut(b)
+    t_cut = time.time()       # the port is down (starting the ip command takes its time on a loaded host)
     time.sleep(4.0)
     t_restore = time.time()
     since = len(run.log_text(1))
@@ -206,18 +213,19 @@ def test_link_cut_zeroes_the_motor_and_the_stack_recovers(tmp_path, netlab, lab_
     codes = run.end_now()
     assert codes['c'] in (0, 4), run.log_text(2)[-3000:]      # 4: the bag misses B's cut seconds
     t = truth(bag)
-    r = cut_reaction(t, t_cut, t_restore)
+    r = {**cut_reaction(t, t_pull, t_cut, t_restore), 'port_down_s': round(t_cut - t_pull, 3)}
     v = judge(read_run(bag))
     after = window(t, t_restore, t['stamp'][-1] + 1)
-    print(json.dumps({'cut': r, 'before': segment_figures(window(t, t_cut - 3, t_cut)),
-                      'cut_figures': segment_figures(window(t, t_cut, t_restore)),
+    print(json.dumps({'cut': r, 'before': segment_figures(window(t, t_pull - 3, t_pull)),
+                      'cut_figures': segment_figures(window(t, t_pull, t_restore)),
                       'after': segment_figures(after), 'verdict': v.as_dict()}, indent=1, default=str))
     assert r['zero_from'] is not None, 'the motor was never at zero during the cut'
     assert r['samples_to_zero'] <= 3 and r['zero_until_restore'], r
+    assert r['cut_to_zero_s'] <= CUT_TAKES_S, r
     assert v.unsafe_samples == 0, v.problems
     warned = [(ns, msg) for ns, name, level, msg, _ in diagnostics(bag)
               if name.endswith('/sim: plant') and level == 1 and 'command timeout' in msg
-              and t_cut * 1e9 <= ns <= t_restore * 1e9 + 1e9]
+              and t_pull * 1e9 <= ns <= t_restore * 1e9 + 1e9]
     assert warned, 'no command-timeout warning of the plant on /diagnostics during the cut'
     # restored: fresh commands again, and (auto) up again after the fall. (Not "no timeout at
     # all in the last second": on a loaded machine a stall of a few ms puts a sample or two at
@@ -413,8 +421,11 @@ def test_two_rigs_in_one_domain_separated_by_namespace(tmp_path, netlab, lab_env
     time.sleep(1.0)
     stop_rigs(runs)
     for ns, _, theta0 in rigs:
-        st = check_rig_heard_only_itself(runs[ns][2], ns, theta0, topics_of_others=True)
-        assert (st['estop'] == 'True') == (ns == '/rigb'), (ns, st['estop'])
+        check_rig_heard_only_itself(runs[ns][2], ns, theta0, topics_of_others=True)
+        # as its plant latched it (estop/state; a fresh-clone run on a loaded host failed on the
+        # simulator's last /diagnostics, from before the e-stop, in a bag that held 64 % of the
+        # samples, while the latched state in both bags was True for /rigb)
+        assert estop_state(runs[ns][2], ns) == (ns == '/rigb'), ns
 
 
 # ------------------------------------------------------------------ one controller per rig
