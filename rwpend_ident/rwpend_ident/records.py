@@ -57,7 +57,9 @@ def refused(name: str, d) -> None:
     controller/status). The loop's faults -- a state a few ms late, on the rig in real time; a
     state refused as implausible, e.g. the estimator's first samples after a hand moved the
     pendulum between two runs -- are reported by the loop and do not stop the identification
-    (what they did to the data, the identification's own checks judge)."""
+    (what they did to the data, the identification's own checks judge). A refusal judged while
+    the plant did not hold the commands (:func:`_late_before`) says that first: the PC fell
+    behind, the verdict is not the rig's."""
     faults = [(t, f) for t, code, f in d.faults if code not in LOOP_FAULTS]
     if faults:
         t, fault = faults[0]
