@@ -154,9 +154,9 @@ def cut_reaction(t: dict, t_pull: float, t_cut: float, t_restore: float) -> dict
     (``last_command``: the sample it answers), the sample instant from which the motor was at
     zero by the command timeout (``zero_from``: the start of the timeout that lasts to the end of
     the cut; ``sim/true_state`` of sample k reports the command held over [t_k-1, t_k)), the
-    samples between the two, that start's time after the port went down (``cut_to_zero_s``, at
-    most :data:`CUT_TAKES_S`), and whether the motor stayed at zero from then until the
-    restore."""
+    samples between the two, and that start's time after the port went down (``cut_to_zero_s``:
+    the motor stayed at zero from then until the restore; a command taken during the cut would
+    put that start after it, beyond :data:`CUT_TAKES_S`)."""
     cut = window(t, t_pull, t_restore)
     if not cut['seq'].size or not cut['command_timeout'][-1]:
         return {'zero_from': None}
@@ -168,10 +168,8 @@ def cut_reaction(t: dict, t_pull: float, t_cut: float, t_restore: float) -> dict
     k0 = int(t['seq'][i])
     before = t['command_seq'][(t['seq'] <= k0)]
     last = int(before[before >= 0].max())
-    held = window(t, float(t['stamp'][i]), t_restore)
     out = {'last_command': last, 'zero_from': k0 - 1, 'samples_to_zero': k0 - 1 - last,
-           'cut_to_zero_s': round(float(t['stamp'][i]) - t_cut, 3),
-           'zero_until_restore': bool(np.all(held['command_timeout'] | (held['u_commanded'] == 0.0)))}
+           'cut_to_zero_s': round(float(t['stamp'][i]) - t_cut, 3)}
     # after the restore: the first sample driven by a fresh command, and the first of 1 s upright
     later = t['stamp'] >= t_restore
     fresh = np.nonzero(later & ~t['command_timeout'].astype(bool))[0]
@@ -220,8 +218,7 @@ def test_link_cut_zeroes_the_motor_and_the_stack_recovers(tmp_path, netlab, lab_
                       'cut_figures': segment_figures(window(t, t_pull, t_restore)),
                       'after': segment_figures(after), 'verdict': v.as_dict()}, indent=1, default=str))
     assert r['zero_from'] is not None, 'the motor was never at zero during the cut'
-    assert r['samples_to_zero'] <= 3 and r['zero_until_restore'], r
-    assert r['cut_to_zero_s'] <= CUT_TAKES_S, r
+    assert r['samples_to_zero'] <= 3 and r['cut_to_zero_s'] <= CUT_TAKES_S, r
     assert v.unsafe_samples == 0, v.problems
     warned = [(ns, msg) for ns, name, level, msg, _ in diagnostics(bag)
               if name.endswith('/sim: plant') and level == 1 and 'command timeout' in msg

@@ -67,6 +67,11 @@ def saturation_problem(gain: float, min_gain: float, limit_s: float, what: str) 
     return None
 
 
+#: the share of the commanded samples the plant must have held for a response to be the rig's
+#: (:func:`delivery_problem`, :func:`late_commands_problem`)
+HELD_SHARE = 0.8
+
+
 def delivery_problem(commanded: list, held: list) -> str | None:
     """Why the first pulse did not reach the motor, or None: ``commanded`` the controller's
     commands from the pulse's first sample on, ``held`` what the plant held over the same
@@ -84,7 +89,7 @@ def delivery_problem(commanded: list, held: list) -> str | None:
         n += 1
     tol = 0.01 * abs(u0) + 0.01
     got = sum(1 for x in held[:n + 3] if abs(x - u0) <= tol)
-    if got >= 0.8 * n:
+    if got >= HELD_SHARE * n:
         return None
     return (f'the pulse of u = {u0:g} did not reach the motor whole: the plant held it for {got} of the '
             f'{n} samples commanded (this PC fell behind the sample rate and the commands came late); '
@@ -104,7 +109,7 @@ def late_commands_problem(commanded: list, held: list, tol: float = 0.03) -> str
     if len(pairs) < 10:
         return None
     got = sum(1 for c, h in pairs if abs(c - h) <= tol + 0.01 * abs(c))
-    if got >= 0.8 * len(pairs):
+    if got >= HELD_SHARE * len(pairs):
         return None
     return (f'the commands did not reach the motor whole before the refusal: the plant held the commanded '
             f'u in {got} of {len(pairs)} samples (this PC fell behind the sample rate and the commands came '
