@@ -185,10 +185,13 @@ def inject(fault: Fault, up_pid: int, layout: str, net: Netns, log) -> bool:
 
 def run_layout(layout: str, duration: float, faults, out_dir: Path, load: bool = True,
                domain: int | None = None, extra: list[str] | None = None, log=print) -> dict:
-    """One soak run; returns {'layout', 'up_status', 'faults', 'verdict', 'ok', ...}."""
+    """One soak run; returns {'layout', 'up_status', 'faults', 'verdict', 'ok', ...}. Its bag,
+    ``out_dir/soak_<layout>``, must not exist yet (ValueError): a run judges only what it recorded."""
     from rwpend_bag.judge import judge, read_run
-    out_dir.mkdir(parents=True, exist_ok=True)
     bag = out_dir / f'soak_{layout}'
+    if bag.exists():
+        raise ValueError(f'{bag} already exists (a bag of an earlier soak; choose another --out)')
+    out_dir.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(domain if domain is not None else 100 + os.getpid() % 100)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -267,7 +270,8 @@ def main(argv=None) -> int:
     p.add_argument('--layouts', default=','.join(LAYOUTS), help='comma-separated: loop, separate, control')
     p.add_argument('--duration', type=float, default=None, help='s per run (default: the scenario\'s)')
     p.add_argument('--no-load', action='store_true', help='no busy loops')
-    p.add_argument('-o', '--out', default=str(ROOT / 'soak_out'), help='output directory (default soak_out)')
+    p.add_argument('-o', '--out', default=None,
+                   help='output directory, new or without soak bags (default soak_out/<date>_<time>)')
     a = p.parse_args(argv)
     layouts = [s.strip() for s in a.layouts.split(',') if s.strip()]
     bad = [s for s in layouts if s not in LAYOUTS]
@@ -279,7 +283,10 @@ def main(argv=None) -> int:
             p.error('--duration must be > 0')
         duration = a.duration
     faults = [f for f in faults if f.at + f.seconds < duration - 30.0] or list(faults[:1])
-    out = Path(a.out)
+    out = Path(a.out) if a.out else ROOT / 'soak_out' / time.strftime('%Y%m%d_%H%M%S')
+    there = [str(out / f'soak_{layout}') for layout in layouts if (out / f'soak_{layout}').exists()]
+    if there:        # judged, they would pass for this run's; never overwritten
+        p.error(f'--out {out}: already holds the bag(s) of an earlier soak: {", ".join(there)}')
     t0 = time.monotonic()
     results = []
     for layout in layouts:

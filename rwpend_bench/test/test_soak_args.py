@@ -1,0 +1,34 @@
+"""``./rwpend soak``'s output: a run judges only the bags it recorded (an earlier soak's bags,
+judged, would pass for its own when ``up`` fails at once), and never overwrites them."""
+import pytest
+
+from rwpend_bench import soak
+
+
+def test_an_earlier_soaks_bag_is_refused_before_anything_runs(tmp_path, capsys):
+    (tmp_path / 'soak_loop').mkdir()
+    with pytest.raises(SystemExit) as exc:
+        soak.main(['--out', str(tmp_path), '--layouts', 'loop,control'])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert 'earlier soak' in err and str(tmp_path / 'soak_loop') in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['soak_loop'], 'nothing else written'
+
+
+def test_run_layout_refuses_an_existing_bag(tmp_path):
+    (tmp_path / 'soak_control').mkdir()
+    with pytest.raises(ValueError, match='already exists'):
+        soak.run_layout('control', 30.0, [], tmp_path, load=False)
+    assert [p.name for p in tmp_path.iterdir()] == ['soak_control']
+
+
+def test_the_default_output_is_new_for_every_soak(tmp_path, monkeypatch):
+    """Two ``make soak`` one after the other each write a directory of their own."""
+    monkeypatch.setattr(soak, 'ROOT', tmp_path)
+    seen = []
+    monkeypatch.setattr(soak, 'run_layout', lambda layout, d, f, out, load: seen.append(out) or
+                        {'layout': layout, 'ok': True, 'up_status': 0, 'stalls_injected': 0,
+                         'verdict': {'gaps': {}, 'recover_s': [], 'resyncs': 0, 'falls': 0,
+                                     'recoveries': 0, 'unsafe_samples': 0, 'latched': [], 'problems': []}})
+    assert soak.main(['--layouts', 'loop', '--no-load']) == 0
+    assert seen[0].parent == tmp_path / 'soak_out' and seen[0].name[:2] == '20'
