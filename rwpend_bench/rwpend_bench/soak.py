@@ -187,7 +187,7 @@ def run_layout(layout: str, duration: float, faults, out_dir: Path, load: bool =
                domain: int | None = None, extra: list[str] | None = None, log=print) -> dict:
     """One soak run; returns {'layout', 'up_status', 'faults', 'verdict', 'ok', ...}. Its bag,
     ``out_dir/soak_<layout>``, must not exist yet (ValueError): a run judges only what it recorded."""
-    from rwpend_bag.judge import judge, read_run
+    from rwpend_bag.judge import Verdict, judge, read_run
     bag = out_dir / f'soak_{layout}'
     if bag.exists():
         raise ValueError(f'{bag} already exists (a bag of an earlier soak; choose another --out)')
@@ -231,7 +231,10 @@ def run_layout(layout: str, duration: float, faults, out_dir: Path, load: bool =
             h.kill()
         up_log.close()
         net.close()
-    verdict = judge(read_run(bag))
+    if bag.is_dir():
+        verdict = judge(read_run(bag))
+    else:            # up failed before it recorded anything (its log says why)
+        verdict = Verdict(problems=[f'no bag: {bag} was not written'])
     # a stop or a stall can always be injected: one that was not leaves the run untested
     missed = [f for f in faults if f.kind != 'drop' and f not in done]
     verdict.problems += [f'not injected: {f.describe()}' for f in missed] + failed
@@ -284,6 +287,8 @@ def main(argv=None) -> int:
         duration = a.duration
     faults = [f for f in faults if f.at + f.seconds < duration - 30.0] or list(faults[:1])
     out = Path(a.out) if a.out else ROOT / 'soak_out' / time.strftime('%Y%m%d_%H%M%S')
+    if out.exists() and not out.is_dir():
+        p.error(f'--out {out}: exists and is not a directory')
     there = [str(out / f'soak_{layout}') for layout in layouts if (out / f'soak_{layout}').exists()]
     if there:        # judged, they would pass for this run's; never overwritten
         p.error(f'--out {out}: already holds the bag(s) of an earlier soak: {", ".join(there)}')

@@ -32,3 +32,22 @@ def test_the_default_output_is_new_for_every_soak(tmp_path, monkeypatch):
                                      'recoveries': 0, 'unsafe_samples': 0, 'latched': [], 'problems': []}})
     assert soak.main(['--layouts', 'loop', '--no-load']) == 0
     assert seen[0].parent == tmp_path / 'soak_out' and seen[0].name[:2] == '20'
+
+
+def test_an_out_that_is_a_file_is_refused(tmp_path, capsys):
+    f = tmp_path / 'x'
+    f.write_text('mine')
+    with pytest.raises(SystemExit) as exc:
+        soak.main(['--out', str(f)])
+    assert exc.value.code == 2 and 'not a directory' in capsys.readouterr().err
+    assert f.read_text() == 'mine'
+
+
+@pytest.mark.system      # starts ./rwpend up (which stops at its arguments)
+def test_an_up_that_records_nothing_is_a_failed_soak_run(tmp_path):
+    """``up`` refused at once (here: an option it does not know): the run fails, saying there is
+    no bag, instead of stopping the soak with a traceback."""
+    r = soak.run_layout('loop', 30.0, [], tmp_path, load=False, extra=['--no-such-option'])
+    assert not r['ok'] and r['up_status'] == 2, r
+    assert any('no bag' in p for p in r['verdict']['problems']), r['verdict']['problems']
+    assert soak.summary([r]).splitlines()[2].split()[:3] == ['loop', 'NO', '2']
