@@ -87,6 +87,14 @@ class Procs:
             time.sleep(0.05)
         raise AssertionError(f'{text!r} not in the log of {tag} within {timeout} s:\n{self.log(tag)[-3000:]}')
 
+    def wait_recording(self, topics, timeout: float = 60.0) -> None:
+        """Until the recorder (``record --all``, started as 'recorder') records every one of
+        ``topics`` (names under NS): it finds a topic by polling the graph, which a loaded host
+        makes slow (a fresh-clone run found the controller's topics 3.4 s after the controller
+        caught the pendulum, after the kill whose status the test looks for)."""
+        for topic in topics:
+            self.wait_log('recorder', f'recording {NS}/{topic} [', timeout)
+
     def kill(self, tag: str) -> int:
         """SIGKILL (a crash); returns the wall time of the kill (ns)."""
         p = self.procs[tag]
@@ -292,6 +300,7 @@ def test_dead_controller_plant_zeroes_and_restart_swings_up_again(tmp_path, ros_
         P.node('estimator', 'estimator', est)
         P.node('ctl1', 'controller', {**ctl, 'mode': 'auto'})
         P.wait_log('ctl1', 'auto/catch', 60)
+        P.wait_recording(['command', 'controller/status', 'state', 'sim/true_state'])
         time.sleep(2.0)                                  # balancing
         kill_ns = P.kill('ctl1')
         rwpend(['tap', '1.5'], ros_env)                  # push it over while nobody controls it
@@ -355,6 +364,7 @@ def test_dead_estimator_controller_reports_stale_and_zeroes(tmp_path, ros_env):
         P.node('est1', 'estimator', est)
         P.node('controller', 'controller', {**ctl, 'mode': 'auto'})
         P.wait_log('controller', 'auto/catch', 60)
+        P.wait_recording(['command', 'controller/status', 'state', 'sim/true_state'])
         time.sleep(1.5)
         kill_ns = P.kill('est1')
         P.wait_log('controller', 'stale state', 20)
