@@ -955,7 +955,7 @@ def _parser() -> argparse.ArgumentParser:
                    help='ROS_DOMAIN_ID of the runs (default: the environment\'s, else 60)')
     p.add_argument('--ns', default='/bench', help='namespace of the benchmarked rig (default /bench)')
     p.add_argument('--keep-bags', action='store_true', help='keep the bags (default: delete them '
-                   'after the metrics are taken)')
+                   'after the metrics are taken); a later bench refuses an --out holding them')
     p.add_argument('-v', '--verbose', action='store_true', help="show the nodes' output")
     p.add_argument('--rt-priority', type=int, default=50, metavar='N',
                    help='./rwpend up --rt-priority of the runs (default 50; 0 = ordinary scheduling)')
@@ -1120,6 +1120,15 @@ def main(argv=None) -> int:
         print(f'rwpend bench: error: {exc}', file=sys.stderr)
         return 2
     out = Path(a.out) if a.out else ROOT / 'bench_out'
+    if out.exists() and not out.is_dir():
+        print(f'rwpend bench: error: --out {out}: exists and is not a directory', file=sys.stderr)
+        return 2
+    kept = sorted(str(d) for d in out.glob('*/metadata.yaml')) if out.is_dir() else []
+    if kept:        # a bench deletes its own bags; these were kept (--keep-bags) or left by a kill
+        print(f'rwpend bench: error: {out} holds the bags of an earlier bench, which this one would '
+              f'overwrite: {", ".join(str(Path(k).parent) for k in kept)} (move them, or --out DIR)',
+              file=sys.stderr)
+        return 2
     out.mkdir(parents=True, exist_ok=True)
     env = _environment(a)
     res = {'started': time.time(), 'machine': machine_info(),
