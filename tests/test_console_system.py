@@ -201,11 +201,24 @@ def gains_are_tuned_from_the_page(d, env):
     msg = field_msg(d, 'balance.kpp')
     assert 'unstable' in msg, msg
     assert float(field(d, 'balance.kpp').get_attribute('value')) == -300.0, "the field shows the node's value"
-    type_into(field(d, 'balance.design.omega0'), '2wp', enter=False)
     from selenium.webdriver.common.by import By
     pv = d.find_element(By.CSS_SELECTOR, '.preview[data-group="balance"]')
-    wait_for(lambda: pv.text.startswith('gives'), 60, 'the design preview')
-    assert 'balance.kpp' in pv.text and 'stable' in pv.text
+    for _ in range(3):
+        d.execute_script("arguments[0].textContent = '';", pv)     # to see the next answer
+        type_into(field(d, 'balance.design.omega0'), '2wp', enter=False)
+        # the answer to '2wp' (the field passes through '' and '2w' as it is typed: a slow
+        # keystroke lets the page ask about those too, and shows their refusals until then)
+        try:
+            wait_for(lambda: pv.text.startswith('gives') or 'did not answer' in pv.text, 60,
+                     'the design preview')
+        except AssertionError:
+            raise AssertionError(f'the design preview of 2wp did not come: it says {pv.text!r}') from None
+        # the preview reads the controller's design and rig parameters (four service calls):
+        # on a loaded host one may take longer than the console waits (5 s; a fresh-clone run
+        # took 12 s to set one gain here), and the page says so; typed again, as a user would
+        if pv.text.startswith('gives'):
+            break
+    assert pv.text.startswith('gives') and 'balance.kpp' in pv.text and 'stable' in pv.text, pv.text
     now = param_get(env, 'balance.kpp', 'balance.design.omega0')
     assert float(now['balance.kpp']) == -300.0, 'the refused value did not take'
     assert now['balance.design.omega0'] == '1.5wp', 'a preview sets nothing'

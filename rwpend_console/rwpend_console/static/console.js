@@ -618,16 +618,21 @@ function commit(node, f, input, msg) {
 }
 
 let previewTimer = null;
+let previewAsked = 0;      // the latest preview asked: only its answer is shown
 
 function preview(node, f, input, det) {
   clearTimeout(previewTimer);
   previewTimer = setTimeout(() => {
+    const mine = ++previewAsked;
     const changes = {};
     for (const i of det.querySelectorAll('input.pending')) {
       if (i.dataset.param.includes('.design.')) changes[i.dataset.param] = i.value;
     }
     const pv = det.querySelector('.preview');
     api('/api/design', { rig: S.rig, node, group: f.designs, changes }).then((j) => {
+      // the console answers requests in parallel: an earlier edit's answer can come after a
+      // later one's, and would show gains for values no longer typed
+      if (mine !== previewAsked) return;
       if (!j.ok) { pv.textContent = 'design: ' + (j.lost ? j.error : reasonOf(j)); pv.className = 'preview unstable'; return; }
       const gains = Object.entries(j.gains).map(([k, v]) => `${k} = ${fmtNumber(Number(v))}`).join(', ');
       pv.textContent = `gives ${gains}` + (j.stable === null ? '' : `; ${j.reason}`) + ' (Enter applies it)';
