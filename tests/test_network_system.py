@@ -400,9 +400,9 @@ def test_three_rigs_separated_by_domain_id_and_namespace(tmp_path, netlab):
     stop_rigs(runs)
     for ns, domain, theta0 in rigs:
         check_rig_heard_only_itself(runs[ns][2], ns, theta0, topics_of_others=False)
-        # the rig's e-stop as its plant latched it (estop/state: transient local, in the bag
-        # whatever the recorder missed; the simulator's last /diagnostics may predate the e-stop
-        # in a bag that lost most of its messages on a loaded host)
+        # the rig's e-stop as its plant latched it (estop/state: reliable and latched, sent again
+        # to a recorder that dropped it while its writer lives, AFTER_ESTOP_S; the simulator's
+        # last /diagnostics may predate the e-stop in a bag that lost most of its messages)
         states = estop_states(runs[ns][2], ns)
         assert states[-1] == (ns == '/rig2'), (ns, states)
 
