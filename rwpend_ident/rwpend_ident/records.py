@@ -121,6 +121,8 @@ def check_directions(name: str, rig, d, k0: int, u0: float) -> None:
     """The encoder and motor directions from the first pulse (rwpend_ident.checks)."""
     dl = rig.count_angle
     seg = slice(k0, min(d.n, k0 + int(round(0.3 / rig.sample_period))))
+    dp = d.pc[seg] - d.pc[k0]
+    dm = d.mc[seg] - d.mc[k0]
     held = getattr(d, 'u_held', None)
     if held is not None and not np.all(np.isnan(held)):
         # the controller's commands from the first it sent for the pulse, against what was held
@@ -128,11 +130,10 @@ def check_directions(name: str, rig, d, k0: int, u0: float) -> None:
         first = np.nonzero(np.abs(c) > 0)[0]
         if first.size:
             k1 = int(first[0])
-            why = delivery_problem(list(c[k1:seg.stop]), list(np.nan_to_num(held[k1:seg.stop])))
+            why = delivery_problem(list(c[k1:seg.stop]), list(np.nan_to_num(held[k1:seg.stop])),
+                                   pendulum_counts=float(np.max(np.abs(dp))) if dp.size else None)
             if why:
                 raise IdentError(f'{name}: {why}')
-    dp = d.pc[seg] - d.pc[k0]
-    dm = d.mc[seg] - d.mc[k0]
     why = direction_problem(u0, float(dp[np.argmax(np.abs(dp))]) * dl, float(dm[np.argmax(np.abs(dm))]) * dl, dl)
     if why:
         raise IdentError(f'{name}: {why}')

@@ -135,3 +135,18 @@ def test_a_pulse_that_did_not_reach_the_motor_is_said_so():
     why = delivery_problem(pulse, fragments)
     assert 'did not reach the motor whole' in why and '6 of the 30' in why
     assert delivery_problem([], []) is None
+
+
+def test_a_pulse_short_of_a_few_samples_is_enough_only_when_the_pendulum_moved():
+    """A pulse held in 46 of its 51 samples (three gaps of the device's hold limit) is the rig's
+    response when the pendulum moved 2 counts or more; with 1 count the check of its encoder
+    cannot tell a short pulse from a missing encoder, and says the pulse was short."""
+    from rwpend_ident.checks import delivery_problem
+    pulse = [3.0] * 51 + [0.0] * 10
+    held = [0.0] + [3.0] * 25 + [0.0] * 3 + [3.0] * 3 + [0.0] * 3 + [3.0] * 18 + [0.0] * 8
+    assert delivery_problem(pulse, held) is None
+    assert delivery_problem(pulse, held, pendulum_counts=2.0) is None
+    why = delivery_problem(pulse, held, pendulum_counts=-1.0)
+    assert 'did not reach the motor whole' in why and '46 of the 51' in why and 'moved 1 count' in why
+    whole = [0.0] + [3.0] * 51 + [0.0] * 9
+    assert delivery_problem(pulse, whole, pendulum_counts=1.0) is None, 'whole: the encoder is judged'
