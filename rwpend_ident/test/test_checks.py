@@ -138,7 +138,7 @@ def test_a_pulse_that_did_not_reach_the_motor_is_said_so():
 
 
 def test_a_pulse_short_of_a_few_samples_is_enough_only_when_the_pendulum_moved():
-    """A pulse held in 46 of its 51 samples (three gaps of the device's hold limit) is the rig's
+    """A pulse held in 46 of its 51 samples (two gaps of the device's hold limit) is the rig's
     response when the pendulum moved 2 counts or more; with 1 count the check of its encoder
     cannot tell a short pulse from a missing encoder, and says the pulse was short."""
     from rwpend_ident.checks import delivery_problem
