@@ -49,13 +49,20 @@ def test_saturation_problem():
 
 def test_late_commands_problem_counts_the_samples_the_plant_held():
     nan = float('nan')
+    v = [-7.0] * 100
+    assert late_commands_problem(v, [-7.0] * 80 + [0.0] * 20) is None               # 80 %: the rig's verdict
+    assert '79 of 100 samples' in late_commands_problem(v, [-7.0] * 79 + [0.0] * 21)
+    # at the limit the verdict is on full torque: 98 % of those samples held
     u = [-10.0] * 100
-    assert late_commands_problem(u, [-10.0] * 80 + [0.0] * 20) is None            # 80 %: the rig's verdict
-    assert '79 of 100 samples' in late_commands_problem(u, [-10.0] * 79 + [0.0] * 21)
+    assert late_commands_problem(u, [-10.0] * 98 + [0.0] * 2) is None
+    why = late_commands_problem(u, [-10.0] * 85 + [0.0] * 15)
+    assert 'saturated u (|u| = 10) in 85 of 100 samples' in why and 'did not reach the motor whole' in why
+    assert late_commands_problem(v[:50] + u[:50], [-7.0] * 50 + [-10.0] * 49 + [0.0]) is None   # 49 of 50
+    assert '79 of 100' in late_commands_problem(u, [-10.0] * 79 + [0.0] * 21), 'the overall share first'
     # the amplifier's quantized value is the command held; samples without a report are not counted
     assert late_commands_problem([3.01] * 50, [3.0] * 50) is None
     assert late_commands_problem(u, [nan] * 95 + [0.0] * 5) is None                # 5 samples: too few to say
-    assert '0 of 10 samples' in late_commands_problem(u, [nan] * 90 + [0.0] * 10)
+    assert '0 of 10 samples' in late_commands_problem(v, [nan] * 90 + [0.0] * 10)
 
 
 def _state(t, theta=0.0, theta_dot=0.0, wheel=0.0, rate=0.0):
