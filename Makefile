@@ -56,10 +56,10 @@ soak: setup
 	@command -v nft >/dev/null 2>&1 || [ "$$(id -u)" != 0 ] || (apt-get update -qq && apt-get install -y -qq nftables) >/dev/null 2>&1 || true
 	@./rwpend soak
 
-# the book's 20 experiments on the simulator (lockstep) -> lab_out/all/ (+ report/index.html)
+# the book's 20 experiments on the simulator (lockstep) -> lab_out/<date>_<time>/ (+ report/index.html);
+# an earlier run's directory is kept
 lab: setup
-	@rm -rf lab_out/all
-	@./rwpend lab run all --out lab_out/all
+	@./rwpend lab run all
 
 # the rig's reference firmware (firmware/README.md): the STM32F405/F407 image with its size report,
 # and the core built for this PC (the emulator's); installs Debian's gcc-arm-none-eabi where missing
