@@ -7,7 +7,10 @@ the loop itself runs: in lockstep, 60 s of samples at 1 kHz took 15.2 s of wall 
 writer thread against 8.6 s with this one (PERFORMANCE.md, "What each mechanism buys"). Here the loop's
 process only appends ``(topic, bytes, time)`` to a queue; a sender thread hands batches of them
 to a child process through a pipe (one pickle per batch), and the child writes the bag, below a
-real-time loop (:func:`_below_the_loop`).
+real-time loop (:func:`_below_the_loop`). The loop's process starts the child first thing
+(:func:`start_process`) and tells it the bag when its recorder is built: the child's interpreter
+and imports (0.3-0.4 s) overlap the parent's, and a parent that ends before it records (a
+refused parameter) leaves no bag behind.
 
 Nothing handed over is lost:
 
@@ -29,7 +32,7 @@ import signal
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from rwpend_ros.sched import RECORDER_BELOW
 
@@ -74,14 +77,32 @@ def _below_the_loop() -> None:
         pass
 
 
+def _detach() -> None:
+    """Ignore SIGINT/SIGTERM (the parent says when to stop), take a name and a priority."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _name_process()
+    _below_the_loop()
+
+
+def serve_when_told(conn) -> None:
+    """The child started ahead of its bag (:func:`start_process`): wait for ``('open', path,
+    order, kwargs)``, then :func:`serve`; a pipe closed first (the parent ended before it
+    recorded, e.g. on a bad parameter) ends it with nothing written."""
+    _detach()
+    try:
+        kind, path, order, kwargs = conn.recv()
+    except (EOFError, OSError):
+        return
+    if kind == 'open':
+        serve(conn, path, order, kwargs, detach=False)
+
+
 def serve(conn, path: str, order, kwargs: dict, detach: bool = True) -> None:
     """The child: open the bag, then take batches until told to stop (or the pipe closes).
     ``detach``: ignore SIGINT/SIGTERM, take a name and a priority (False: a test's thread)."""
     if detach:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        _name_process()
-        _below_the_loop()
+        _detach()
     try:
         sink = BagSink(path, order, **kwargs)
     except BaseException as exc:  # noqa: BLE001 - told to the parent, which raises it
@@ -105,24 +126,45 @@ def serve(conn, path: str, order, kwargs: dict, detach: bool = True) -> None:
             sink.take(item)
 
 
+class WriterProcess(NamedTuple):
+    """A bag writer's child process, started and not yet told its bag (:func:`start_process`)."""
+    proc: Any
+    conn: Any
+
+
+def start_process() -> WriterProcess:
+    """Start the writer's child now, its bag to come (:class:`ProcessBagWriter` ``process=``):
+    its interpreter and imports (0.3-0.4 s on our slowest host) then overlap the parent's own.
+    A parent that ends without recording ends the child, nothing written."""
+    ctx = multiprocessing.get_context('spawn')       # never fork a process with ROS threads
+    conn, child = ctx.Pipe(duplex=True)
+    proc = ctx.Process(target=serve_when_told, args=(child,), name='rwpend-bag-writer')
+    proc.start()
+    child.close()
+    return WriterProcess(proc, conn)
+
+
 class ProcessBagWriter:
     """The interface of :class:`rwpend_bag.writer.ThreadedBagWriter` (``add_topic``, ``put``
     from any thread, ``queue_size``, ``close`` -> the recording report) with the writing in a
     child process (module doc). Raises :class:`BagError` when the bag cannot be opened."""
 
-    def __init__(self, path, order=None, **kwargs):
+    def __init__(self, path, order=None, process: WriterProcess | None = None, **kwargs):
+        """``process``: a child started ahead (:func:`start_process`), else one is started now."""
         self.path = Path(path)
         check_new_bag_path(self.path)
-        ctx = multiprocessing.get_context('spawn')       # never fork a process with ROS threads
-        self._conn, child = ctx.Pipe(duplex=True)
-        self._proc = ctx.Process(target=serve, args=(child, str(self.path), order, kwargs),
-                                 name='rwpend-bag-writer')
-        self._proc.start()
-        child.close()
-        if not self._conn.poll(START_TIMEOUT_S):
-            self._proc.kill()
-            raise BagError(f'the bag writer process did not open {self.path} within {START_TIMEOUT_S:g} s')
-        kind, why = self._conn.recv()
+        started = process or start_process()
+        self._conn, self._proc = started.conn, started.proc
+        try:
+            self._conn.send(('open', str(self.path), order, kwargs))
+            if not self._conn.poll(START_TIMEOUT_S):
+                self._proc.kill()
+                raise BagError(f'the bag writer process did not open {self.path} within {START_TIMEOUT_S:g} s')
+            kind, why = self._conn.recv()
+        except (EOFError, OSError) as exc:
+            self._proc.join(timeout=5.0)
+            raise BagError(f'the bag writer process ended before it opened {self.path} '
+                           f'({self._exit_text()}): {exc!r}') from None
         if kind != 'ready':
             self._proc.join()
             raise BagError(why)

@@ -60,11 +60,12 @@ def qos_dict(q) -> dict:
 class Recorder(Node):
     def __init__(self, out_dir: str, topics: list[str] | None, record_all: bool,
                  progress: str | None = None, sim_time: bool = False, direct: dict | None = None,
-                 writer_process: bool = False):
+                 writer_process=False):
         """``direct``: {topic: (type name, offered QoS list)} of topics whose messages are put
         into :attr:`writer` by their publishers in this process (rwpend_loop.host), not
         subscribed. ``writer_process``: the bag is written by a child process
-        (:class:`rwpend_bag.procwriter.ProcessBagWriter`), not by a thread of this one."""
+        (:class:`rwpend_bag.procwriter.ProcessBagWriter`), not by a thread of this one -- the
+        child started ahead when it is a :class:`~rwpend_bag.procwriter.WriterProcess`."""
         super().__init__('recorder')
         #: publisher of the progress (the newest /clock taken), None without --progress
         self.progress_pub = None
@@ -77,7 +78,8 @@ class Recorder(Node):
         order = SimTimeOrder() if sim_time else None
         if writer_process:
             from .procwriter import ProcessBagWriter
-            self.writer = ProcessBagWriter(out_dir, order=order)
+            ahead = writer_process if isinstance(writer_process, tuple) else None
+            self.writer = ProcessBagWriter(out_dir, order=order, process=ahead)
         else:
             self.writer = ThreadedBagWriter(out_dir, order=order)
         self.wanted = set(topics or [])

@@ -12,7 +12,7 @@ import pytest
 from rwpend_bag import sameness
 from support import synth
 from rwpend_bag.logtime import SimTimeOrder
-from rwpend_bag.procwriter import DIED_WITHOUT_CLOSE, ProcessBagWriter, serve
+from rwpend_bag.procwriter import DIED_WITHOUT_CLOSE, ProcessBagWriter, serve, start_process
 from rwpend_bag.reader import read_bag
 from rwpend_bag.writer import BagError, ThreadedBagWriter, default_qos
 
@@ -41,6 +41,26 @@ def test_the_same_bag_as_the_threaded_writer(tmp_path, records):
     assert b['topics'] == a['topics'] and 'writer_error' not in b
     assert json.loads((tmp_path / 'process' / 'recording_report.json').read_text())['message_count'] == len(records)
     assert read_bag(tmp_path / 'process').metadata['custom_data']['rwpend.log_time'] == 'sim'
+
+
+def test_a_process_started_ahead_writes_the_same_bag(tmp_path, records):
+    """The loop's process starts its writer before its own imports (rwpend_loop.host), and
+    tells it the bag later: the bag is the one a writer started at once writes."""
+    ahead = start_process()
+    a = _write(ProcessBagWriter(tmp_path / 'now', order=SimTimeOrder()), records)
+    b = _write(ProcessBagWriter(tmp_path / 'ahead', order=SimTimeOrder(), process=ahead), records)
+    assert sameness.compare(tmp_path / 'now', tmp_path / 'ahead') == []
+    assert b['message_count'] == a['message_count'] == len(records)
+
+
+def test_a_process_started_ahead_and_never_told_writes_nothing(tmp_path):
+    """A loop's process that ends before it records (a refused parameter) closes the pipe: the
+    child ends at once, with no bag directory made."""
+    ahead = start_process()
+    ahead.conn.close()
+    ahead.proc.join(timeout=30)
+    assert ahead.proc.exitcode == 0
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_an_existing_bag_is_refused_before_a_process_starts(tmp_path):

@@ -231,6 +231,11 @@ def judge_run(a: Stack, specs, exit_codes: dict, status: int, wall_s: float, int
     if not a.record or not names & {'recorder', 'loop'}:
         return status
     report_file = Path(a.record) / 'recording_report.json'
+    if 'loop' in names and not Path(a.record).exists():
+        # the loop's process ended before its recorder opened the bag (a refused parameter:
+        # its reason is above): there is no bag to wait for
+        print(f'rwpend: no bag: the loop ended before it opened {a.record}', file=sys.stderr, flush=True)
+        return status or EXIT_SHORT_BAG
     if 'loop' in names and not report_file.exists():
         # the loop's bag writer is a process of its own: when the loop's process ended without
         # closing the bag, the writer finishes it on its own (rwpend_bag.procwriter)

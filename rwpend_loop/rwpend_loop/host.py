@@ -154,7 +154,7 @@ class Host:
     """The nodes of this process and the loop that runs through them (the simulator's; the
     rig's: :class:`rwpend_loop.rig.RigHost`)."""
 
-    def __init__(self, names: list[str], record: str | None, sim_time: bool) -> None:
+    def __init__(self, names: list[str], record: str | None, sim_time: bool, writer_process=True) -> None:
         from rwpend_sim.sim_node import SimNode
         from rwpend_loop.loop import ControllerStage, Loop
         self.lock = LoopLock()
@@ -169,7 +169,7 @@ class Host:
         if record:
             from rwpend_bag.recorder_node import Recorder
             self.recorder = Recorder(record, None, True, sim_time=sim_time, direct=self._tap(self._put),
-                                     writer_process=True)
+                                     writer_process=writer_process)
             self.nodes.append(self.recorder)
         else:
             self._tap(None)
@@ -532,6 +532,12 @@ def main(argv=None) -> int:
     apply_scheduling()
     # the loop thread must get the GIL within a fraction of a sample when it wakes
     sys.setswitchinterval(0.0002)
+    # the bag writer's child starts now, its interpreter and imports beside this process's own
+    # (after apply_scheduling: it takes its priority from this process's)
+    writer = True
+    if a.record:
+        from rwpend_bag.procwriter import start_process
+        writer = start_process()
     rclpy.init(args=[sys.argv[0], *ros], signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
     old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -540,12 +546,12 @@ def main(argv=None) -> int:
     try:
         if 'driver' in a.nodes:
             from rwpend_loop.rig import RigHost
-            host = RigHost(a.nodes, a.record)
+            host = RigHost(a.nodes, a.record, writer_process=writer)
         elif 'sim' not in a.nodes:
             from rwpend_loop.control import ControlHost
             host = ControlHost(a.nodes)
         else:
-            host = Host(a.nodes, a.record, a.sim_time)
+            host = Host(a.nodes, a.record, a.sim_time, writer_process=writer)
         apply_thread_priority(host.nodes)       # before the loop's thread starts: it inherits it
         executor = make_executor()
         for node in host.nodes:
@@ -568,6 +574,11 @@ def main(argv=None) -> int:
                     node.destroy_node()
                 except Exception:  # noqa: BLE001
                     pass
+        if writer is not True:
+            # told its bag and closed by the recorder above, or never told (a bad parameter):
+            # its pipe closed, the child ends without writing anything
+            writer.conn.close()
+            writer.proc.join(timeout=5.0)
         rclpy.try_shutdown()
         for sig, h in old.items():
             signal.signal(sig, h)

@@ -81,7 +81,7 @@ class RigHost:
         if record:
             from rwpend_bag.recorder_node import Recorder
             self.recorder = Recorder(record, None, True, direct=tap_publishers(taps, self._put),
-                                     writer_process=True)
+                                     writer_process=writer_process)
             self.nodes.append(self.recorder)
         else:
             tap_publishers(taps, None)
