@@ -219,3 +219,21 @@ def test_emulator_driver_unplug_replug_kill(tmp_path):
     dead = [d for d in diags if d[0] > t['kill'] + 0.5]
     assert dead and all(d[1] == 2 for d in dead)
     print('measured:', json.dumps(report))
+
+
+def test_a_run_that_never_reaches_the_rig_fails_with_the_reason(tmp_path):
+    """``up`` on a port with no rig behind it (a wrong name, the rig unplugged): the driver says
+    why the link does not open and keeps trying while the run lasts; stopped (Ctrl-C), the run
+    fails with the link's error -- not a success with nothing done."""
+    p = subprocess.Popen([str(ROOT / 'rwpend'), 'up', '--plant', f'serial:{tmp_path / "no-such-port"}'],
+                         env=_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        first, _ = _readline_until(p, lambda line: 'configure failed' in line, 60)
+        assert 'no-such-port' in first, first
+        p.send_signal(signal.SIGINT)
+        rest, _ = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode != 0, rest[-3000:]
+    assert 'the rig sent no sample in this run' in rest and 'no-such-port' in rest, rest[-3000:]

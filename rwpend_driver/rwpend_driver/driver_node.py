@@ -437,11 +437,23 @@ class DriverNode(LifecycleNode):
         self.publish_diagnostics()
 
     def exit_status(self) -> int:
-        """:data:`rwpend_ros.health.EXIT_LOOP_DEAD` when the loop was dead at the end."""
+        """:data:`rwpend_ros.health.EXIT_LOOP_DEAD` when the loop was dead at the end; 1 when
+        the rig never sent a sample in the whole run (the link never opened: a wrong port, the
+        rig unplugged) -- a run that never reached the rig is not a success."""
+        if self.never_reached_the_rig():
+            why = f': {self.last_configure_error}' if self.last_configure_error else ''
+            print(f'driver: the rig sent no sample in this run ({self.configure_failures} failed '
+                  f'attempt(s) to open the link{why})', file=sys.stderr, flush=True)
+            return 1
         if self.loop.dead:
             print(f'driver: {self.loop.dead_reason()} (at the end of the run)', file=sys.stderr, flush=True)
             return EXIT_LOOP_DEAD
         return 0
+
+    def never_reached_the_rig(self) -> bool:
+        """No sample read from the rig in the whole run, the link having failed to open."""
+        return (self.configure_failures > 0 and self.first_published is None
+                and self.samples_before_start == 0 and self.loop_started is None)
 
     def check_duration(self) -> None:
         """``duration`` s after the first command: finished, the runner ends the process

@@ -523,7 +523,7 @@ def main(argv=None) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
-    from rwpend_ros.params import ConfigError
+    from rwpend_ros.params import ConfigError, refuse_undeclared
     from rwpend_ros.runner import apply_thread_priority, close_nodes, freeze_gc, make_executor, spin_executor
     from rwpend_ros.sched import apply_scheduling
     from rwpend_ros.transport import apply_transport_or_exit
@@ -552,6 +552,7 @@ def main(argv=None) -> int:
             host = ControlHost(a.nodes)
         else:
             host = Host(a.nodes, a.record, a.sim_time, writer_process=writer)
+        refuse_undeclared(host.nodes)           # a misspelt parameter is an error, not ignored
         apply_thread_priority(host.nodes)       # before the loop's thread starts: it inherits it
         executor = make_executor()
         for node in host.nodes:

@@ -61,7 +61,7 @@ class RigHost:
     """The nodes of the loop's process on the rig (module doc); the same interface as
     :class:`rwpend_loop.host.Host` for :func:`rwpend_loop.host.main`."""
 
-    def __init__(self, names: list[str], record: str | None) -> None:
+    def __init__(self, names: list[str], record: str | None, writer_process=True) -> None:
         from rwpend_driver.driver_node import DriverNode
         from rwpend_loop.host import LoopLock, build_loop_nodes, tap_publishers
         from rwpend_loop.loop import ControllerStage, Loop

@@ -6,6 +6,7 @@ from the one rig YAML: :func:`declare_rig`); :class:`ConfigError` for a configur
 refuses (reported, exit status 2)."""
 from __future__ import annotations
 
+import difflib
 from dataclasses import fields
 from typing import Any, Iterable
 
@@ -27,6 +28,15 @@ _TYPES = {'bool': Parameter.Type.BOOL, 'integer': Parameter.Type.INTEGER,
 
 class ConfigError(ValueError):
     """A node's configuration (parameters) is invalid: the node reports it and exits with status 2."""
+
+
+def refuse_undeclared(nodes) -> None:
+    """:meth:`ParameterTable.refuse_undeclared` for every node of ``nodes`` that has a
+    ``param_table`` (the stack's own); the first ConfigError is raised."""
+    for node in nodes:
+        table = getattr(node, 'param_table', None)
+        if isinstance(table, ParameterTable):
+            table.refuse_undeclared()
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
@@ -101,6 +111,27 @@ class ParameterTable:
         if reason:
             raise ConfigError(reason)
         return node.declare_parameter(spec.name, value, descriptor(spec), ignore_override=True).value
+
+    def undeclared_overrides(self) -> list[str]:
+        """The names given to the node (params files, ``-p``, ``--set``) that it did not declare:
+        rclpy ignores them without a word, so a misspelt ``balance.kp`` would leave the default
+        in place. Sorted; empty when rclpy does not say which overrides it was given."""
+        given = getattr(self.node, '_parameter_overrides', None) or {}
+        return sorted(n for n in given if not self.node.has_parameter(n))
+
+    def refuse_undeclared(self) -> None:
+        """ConfigError naming every override the node did not declare (:meth:`undeclared_overrides`),
+        with the nearest declared names: called once the node has declared all of its own."""
+        unknown = self.undeclared_overrides()
+        if not unknown:
+            return
+        declared = list(self.node.list_parameters([], 0).names)
+        said = []
+        for name in unknown:
+            near = difflib.get_close_matches(name, declared, n=3)
+            said.append(f'{name!r}' + (f' (did you mean {", ".join(near)}?)' if near else ''))
+        raise ConfigError(f'{self.node.get_fully_qualified_name()} has no parameter {"; ".join(said)}: '
+                          '`./rwpend param list` (ros2 param list) names those it has')
 
     def convert(self, params: list[Parameter]) -> list[Parameter]:
         """Pre-set callback: each value read as its parameter's type where the tools' rules allow

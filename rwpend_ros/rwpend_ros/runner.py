@@ -12,7 +12,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from rwpend_ros.params import ConfigError
+from rwpend_ros.params import ConfigError, refuse_undeclared
 from rwpend_ros.sched import apply_scheduling, set_process_priority
 from rwpend_ros.transport import apply_transport_or_exit
 
@@ -121,6 +121,7 @@ def run_node(factory: Callable[[], Any], args: list[str] | None = None) -> int:
     status = 0
     try:
         nodes.append(factory())
+        refuse_undeclared(nodes)        # a misspelt parameter is an error, not ignored
         apply_thread_priority(nodes)
         executor = make_executor()
         for node in nodes:

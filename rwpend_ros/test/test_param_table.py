@@ -124,3 +124,18 @@ def test_descriptor_of_an_integer_range_with_a_step():
     d = descriptor(ParamSpec('sign', 1, 'a sign', low=-1, high=1, step=2, read_only=True))
     r = d.integer_range[0]
     assert (r.from_value, r.to_value, r.step, d.read_only) == (-1, 1, 2, True)
+
+
+def test_an_override_the_node_does_not_declare_is_refused_with_the_nearest_names(make_node):
+    """rclpy ignores an override no parameter takes (a misspelt name would leave the default in
+    place); the table names it, with the declared names nearest to it."""
+    node, table = make_node(gian=-2.0, count=4)
+    table.declare(SPECS)
+    assert table.undeclared_overrides() == ['gian']
+    with pytest.raises(ConfigError, match=r"has no parameter 'gian' \(did you mean gain\?\)"):
+        table.refuse_undeclared()
+    node, table = make_node(count=4)
+    table.declare(SPECS)
+    assert table.undeclared_overrides() == []
+    table.refuse_undeclared()
+    assert node.get_parameter('count').value == 4
