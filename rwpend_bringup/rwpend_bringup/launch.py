@@ -125,6 +125,23 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child
     os.setpgrp()   # own process group: a terminal Ctrl-C reaches the launcher only
 
 
+#: a node's exit status when it refused its configuration (rwpend_ros.params.ConfigError)
+EXIT_CONFIG = 2
+
+
+def run_status(codes: dict[str, int]) -> tuple[int, str]:
+    """The launcher's exit status from its nodes' ``codes`` and what to say: 0 when every node
+    ended well (or by our Ctrl-C); :data:`EXIT_CONFIG` when each node that failed refused its
+    configuration (its reason is in its log); 1 for any other failure."""
+    failed = {n: c for n, c in codes.items() if c not in (0, -signal.SIGINT, 130)}
+    if not failed:
+        return 0, ''
+    listed = ', '.join(f'{n} (exit {c})' for n, c in failed.items())
+    if all(c == EXIT_CONFIG for c in failed.values()):
+        return EXIT_CONFIG, f'node(s) refused their configuration: {listed} (the reason above)'
+    return 1, f'node(s) ended with an error: {listed}'
+
+
 class Launcher:
     """Runs a set of node processes; ``run()`` returns when stopped, with an exit status."""
 
@@ -248,9 +265,7 @@ class Launcher:
             for s, h in old.items():
                 signal.signal(s, h)
         self.reason = reason
-        failed = {n: c for n, c in codes.items() if c not in (0, -signal.SIGINT, 130)}
-        if failed:
-            print('rwpend: node(s) ended with an error: '
-                  + ', '.join(f'{n} (exit {c})' for n, c in failed.items()), file=sys.stderr)
-            return 1
-        return 0
+        status, said = run_status(codes)
+        if said:
+            print(f'rwpend: {said}', file=sys.stderr)
+        return status
