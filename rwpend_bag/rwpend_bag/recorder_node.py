@@ -77,8 +77,8 @@ class Recorder(Node):
         self._clocks = 0
         order = SimTimeOrder() if sim_time else None
         if writer_process:
-            from .procwriter import ProcessBagWriter
-            ahead = writer_process if isinstance(writer_process, tuple) else None
+            from .procwriter import ProcessBagWriter, WriterProcess
+            ahead = writer_process if isinstance(writer_process, WriterProcess) else None
             self.writer = ProcessBagWriter(out_dir, order=order, process=ahead)
         else:
             self.writer = ThreadedBagWriter(out_dir, order=order)

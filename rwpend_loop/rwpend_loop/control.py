@@ -70,10 +70,12 @@ class ControlHost:
         from rwpend_loop.loop import ControllerStage, Loop
         from rwpend_msgs.msg import EncoderCounts
         from rwpend_ros.nodes import local_subscription
+        from rwpend_ros.params import refuse_undeclared
         from rwpend_ros.qos import QOS_CONTROL
         self.lock = LoopLock()
         self.est, self.ctrl = build_loop_nodes(names, self.lock, plant_here=False)
         self.nodes = [self.est, self.ctrl]
+        refuse_undeclared(self.nodes)       # a misspelt name is an error, not ignored
         self.hw = TopicReading(self.est.align)
         self.loop = Loop(self.hw, TopicGate(), self.est.stage,
                          ControllerStage(self.ctrl.ctrl, self.ctrl.controller_id), self.est.rig.sample_period)

@@ -155,12 +155,14 @@ class Host:
     rig's: :class:`rwpend_loop.rig.RigHost`)."""
 
     def __init__(self, names: list[str], record: str | None, sim_time: bool, writer_process=True) -> None:
+        from rwpend_ros.params import refuse_undeclared
         from rwpend_sim.sim_node import SimNode
         from rwpend_loop.loop import ControllerStage, Loop
         self.lock = LoopLock()
         self.sim = SimNode(self.lock, external_command='controller' not in names)
         self.est, self.ctrl = build_loop_nodes(names, self.lock)
         self.nodes = [n for n in (self.sim, self.est, self.ctrl) if n is not None]
+        refuse_undeclared(self.nodes)       # before the recorder opens a bag: a misspelt name is an error
         if self.ctrl is not None:
             from std_msgs.msg import Bool
             ctrl = self.ctrl
@@ -523,7 +525,7 @@ def main(argv=None) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
-    from rwpend_ros.params import ConfigError, refuse_undeclared
+    from rwpend_ros.params import ConfigError
     from rwpend_ros.runner import apply_thread_priority, close_nodes, freeze_gc, make_executor, spin_executor
     from rwpend_ros.sched import apply_scheduling
     from rwpend_ros.transport import apply_transport_or_exit
@@ -534,10 +536,10 @@ def main(argv=None) -> int:
     sys.setswitchinterval(0.0002)
     # the bag writer's child starts now, its interpreter and imports beside this process's own
     # (after apply_scheduling: it takes its priority from this process's)
-    writer = True
+    ahead = None
     if a.record:
         from rwpend_bag.procwriter import start_process
-        writer = start_process()
+        ahead = start_process()
     rclpy.init(args=[sys.argv[0], *ros], signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
     old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -546,13 +548,12 @@ def main(argv=None) -> int:
     try:
         if 'driver' in a.nodes:
             from rwpend_loop.rig import RigHost
-            host = RigHost(a.nodes, a.record, writer_process=writer)
+            host = RigHost(a.nodes, a.record, writer_process=ahead or True)
         elif 'sim' not in a.nodes:
             from rwpend_loop.control import ControlHost
             host = ControlHost(a.nodes)
         else:
-            host = Host(a.nodes, a.record, a.sim_time, writer_process=writer)
-        refuse_undeclared(host.nodes)           # a misspelt parameter is an error, not ignored
+            host = Host(a.nodes, a.record, a.sim_time, writer_process=ahead or True)
         apply_thread_priority(host.nodes)       # before the loop's thread starts: it inherits it
         executor = make_executor()
         for node in host.nodes:
@@ -575,11 +576,11 @@ def main(argv=None) -> int:
                     node.destroy_node()
                 except Exception:  # noqa: BLE001
                     pass
-        if writer is not True:
+        if ahead is not None:
             # told its bag and closed by the recorder above, or never told (a bad parameter):
             # its pipe closed, the child ends without writing anything
-            writer.conn.close()
-            writer.proc.join(timeout=5.0)
+            ahead.conn.close()
+            ahead.proc.join(timeout=5.0)
         rclpy.try_shutdown()
         for sig, h in old.items():
             signal.signal(sig, h)

@@ -66,10 +66,12 @@ class RigHost:
         from rwpend_loop.host import LoopLock, build_loop_nodes, tap_publishers
         from rwpend_loop.loop import ControllerStage, Loop
         from rwpend_ros import wire
+        from rwpend_ros.params import refuse_undeclared
         self.lock = LoopLock()
         self.driver = DriverNode(loop_lock=self.lock.lock, external_command='controller' not in names)
         self.est, self.ctrl = build_loop_nodes(names, self.lock)
         self.nodes = [n for n in (self.driver, self.est, self.ctrl) if n is not None]
+        refuse_undeclared(self.nodes)       # before the recorder opens a bag: a misspelt name is an error
         driver = self.driver
         if self.ctrl is not None:
             from std_msgs.msg import Bool
