@@ -40,6 +40,36 @@ def _abs_topic(name: str, namespace: str) -> str:
 
 
 # ------------------------------------------------------------------ record
+def recorder_priority(given: int | None, env_value: str | None, sim_time: bool,
+                      permitted) -> tuple[int | None, str]:
+    """The SCHED_FIFO priority ``rwpend record`` takes (None: leave ``RWPEND_RT_PRIORITY`` as
+    the environment has it, or ordinary scheduling), and why.
+
+    ``given``: ``--rt-priority``; ``env_value``: ``RWPEND_RT_PRIORITY`` (``./rwpend up`` sets it
+    for its recorder); ``permitted``: ``priority -> (ok, reason)``
+    (:func:`rwpend_ros.sched.realtime_permitted`). Nodes started the ROS way (``./rwpend node``)
+    take SCHED_FIFO 50 in real time; a recorder beside them at ordinary priority gets only the
+    CPU they leave (PERFORMANCE.md, "Nodes started one by one"). So, as the recorder of
+    ``./rwpend up`` does, it runs ``RECORDER_BELOW`` priorities below them: ahead of every
+    ordinary process, behind the loop, which cannot wait. With ``--sim-time`` (lockstep) the
+    nodes run at ordinary priority and wait for the recorder."""
+    from rwpend_ros.sched import DEFAULT_RT_PRIORITY, RECORDER_BELOW
+    if given is not None:
+        return given, (f'SCHED_FIFO {given} (--rt-priority)' if given else
+                       'ordinary scheduling (--rt-priority 0)')
+    if env_value is not None and env_value.strip():
+        return None, f'priority from RWPEND_RT_PRIORITY={env_value.strip()} (0: ordinary scheduling)'
+    if sim_time:
+        return None, 'ordinary scheduling (--sim-time: lockstep nodes wait for the recorder)'
+    prio = max(1, DEFAULT_RT_PRIORITY - RECORDER_BELOW)
+    ok, reason = permitted(prio)
+    if not ok:
+        return None, (f'ordinary scheduling: real-time priority not permitted here ({reason}); beside '
+                      'nodes at real-time priority a busy machine may then keep samples from the bag')
+    return prio, (f"SCHED_FIFO {prio} ({RECORDER_BELOW} below the nodes' default {DEFAULT_RT_PRIORITY}, "
+                  'where permitted; --rt-priority 0 to turn it off)')
+
+
 def record_main(argv=None) -> int:
     return _run(_record, sys.argv[1:] if argv is None else argv)
 
@@ -60,8 +90,9 @@ def _record(argv) -> int:
                         '--lockstep --record sets it; rwpend_bag.logtime)')
     p.add_argument('--rt-priority', type=int, default=None, metavar='N',
                    help='SCHED_FIFO priority of the recorder (1-99; 0: ordinary scheduling; default: '
-                        'RWPEND_RT_PRIORITY, which ./rwpend up sets, else ordinary). Beside nodes at '
-                        'real-time priority 50 in real time, 40 keeps it ahead of every ordinary process')
+                        'RWPEND_RT_PRIORITY, which ./rwpend up sets, else 40 where permitted -- 10 below '
+                        "the nodes' default 50, ahead of every ordinary process -- and ordinary with "
+                        '--sim-time)')
     p.add_argument('topics', nargs='*', help='topics to record')
     a = p.parse_args(argv)
     if a.rt_priority is not None and not 0 <= a.rt_priority <= 99:
@@ -85,8 +116,12 @@ def _record(argv) -> int:
             validate_full_topic_name(progress)
         except InvalidTopicNameException as exc:
             return _usage_error(p.prog, f'--progress: invalid topic name {a.progress!r} ({exc})')
-    if a.rt_priority is not None:
-        os.environ['RWPEND_RT_PRIORITY'] = str(a.rt_priority)   # taken by the recorder at its start
+    from rwpend_ros.sched import realtime_permitted
+    prio, why = recorder_priority(a.rt_priority, os.environ.get('RWPEND_RT_PRIORITY'), a.sim_time,
+                                  realtime_permitted)
+    if prio is not None:
+        os.environ['RWPEND_RT_PRIORITY'] = str(prio)   # taken by the recorder at its start
+    print(f'rwpend record: {why}', file=sys.stderr, flush=True)
     from .recorder_node import run_recorder
     return run_recorder(str(out), topics, a.all, progress, a.sim_time)
 

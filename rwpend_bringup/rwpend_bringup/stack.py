@@ -410,13 +410,16 @@ def _apply_scheduling(stack: Stack, specs: list[NodeSpec]) -> None:
     prio = stack.rt_priority or 0
     if not 0 <= prio <= 99:
         raise ValueError(f'--rt-priority must be in 0..99, got {prio}')
-    if prio:
-        for s in specs:
-            # real time: the recorder below the loop (it can wait, the loop cannot); lockstep:
-            # the loop keeps both CPUs busy and waits for the recorder (its window), so the
-            # recorder runs at the loop's priority
-            below = s.name == 'recorder' and not stack.lockstep
+    for s in specs:
+        # real time: the recorder below the loop (it can wait, the loop cannot); lockstep:
+        # the loop keeps both CPUs busy and waits for the recorder (its window), so the
+        # recorder runs at the loop's priority; none for the loop, none for the recorder (said:
+        # rwpend record alone takes a priority of its own)
+        if s.name == 'recorder':
+            below = prio and not stack.lockstep
             s.env['RWPEND_RT_PRIORITY'] = str(max(1, prio - RECORDER_BELOW) if below else prio)
+        elif prio:
+            s.env['RWPEND_RT_PRIORITY'] = str(prio)
     if stack.cpu_latency is not None and stack.cpu_latency < 0:
         raise ValueError(f'--cpu-latency must be >= 0 (µs), got {stack.cpu_latency}')
     check_pins(stack.pins, [s.name for s in specs])

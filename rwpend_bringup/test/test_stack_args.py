@@ -35,6 +35,9 @@ def test_rt_priority_and_pins_go_to_the_environment():
     assert s['sim'].env['RWPEND_RT_PRIORITY'] == '50' and s['recorder'].env['RWPEND_RT_PRIORITY'] == '40'
     assert s['sim'].env['RWPEND_CPUS'] == '1' and s['recorder'].env['RWPEND_CPUS'] == '0'
     assert 'RWPEND_CPUS' not in s['estimator'].env and 'RWPEND_CPUS' not in specs_of()['sim'].env
+    # at no priority the recorder is told so (rwpend record alone would take 40 where permitted)
+    none = specs_of('--record', NO_BAG)
+    assert none['recorder'].env['RWPEND_RT_PRIORITY'] == '0' and 'RWPEND_RT_PRIORITY' not in none['sim'].env
 
 
 def test_cpus_is_not_an_option(capsys):
