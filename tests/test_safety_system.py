@@ -471,7 +471,12 @@ RELAY = textwrap.dedent('''
                 time.sleep(wait)
             with cv:
                 q.popleft()
-            pub.publish(m)
+            try:
+                pub.publish(m)
+            except Exception:
+                if rclpy.ok():
+                    raise
+                return              # Ctrl-C shut the context down under this thread's publish
             n['out'] += 1
     node.create_subscription(StateEstimate, 'state', on_state, QOS_CONTROL)
     threading.Thread(target=delayer, daemon=True).start()
