@@ -49,7 +49,7 @@ def recorder_priority(given: int | None, env_value: str | None, sim_time: bool,
     for its recorder); ``permitted``: ``priority -> (ok, reason)``
     (:func:`rwpend_ros.sched.realtime_permitted`). Nodes started the ROS way (``./rwpend node``)
     take SCHED_FIFO 50 in real time; a recorder beside them at ordinary priority gets only the
-    CPU they leave (PERFORMANCE.md, "Nodes started one by one"). So, as the recorder of
+    CPU they leave (PERFORMANCE.md, "What each mechanism buys"). So, as the recorder of
     ``./rwpend up`` does, it runs ``RECORDER_BELOW`` priorities below them: ahead of every
     ordinary process, behind the loop, which cannot wait. With ``--sim-time`` (lockstep) the
     nodes run at ordinary priority and wait for the recorder."""
