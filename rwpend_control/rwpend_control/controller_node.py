@@ -63,6 +63,7 @@ from rwpend_ros import wire
 from rwpend_ros.claim import format_id
 from rwpend_ros.trace import tracer
 from rwpend_ros.diagnostics import publish_diagnostic
+from rwpend_ros.health import other_clock
 from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.qos import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS
@@ -130,6 +131,8 @@ class ControllerNode(RwNode):
         self.law_errors = 0          # exceptions inside the control laws (u = 0)
         self.param_errors = 0        # exceptions while validating parameters (refused)
         self.stale_fault = ''        # the fault while the state is stale
+        self.other_clock = None      # why the states' stamps are not on this node's clock (checked once)
+        self._clock_checked = False
         self._last_fault_code = FAULT_NONE
         self._since_status = 0
         self._syncing = False
@@ -335,6 +338,8 @@ class ControllerNode(RwNode):
             self.trace('ctl.rx', seq, rx)
         self._last_header = header
         sec, nanosec = wire.header_stamp(header)
+        if not self._clock_checked and (sec or nanosec):
+            self._check_clock(sec + nanosec * 1e-9, now)
         if sec == 0 and nanosec == 0:
             sec, nanosec = divmod(now_t.nanoseconds, 1_000_000_000)
             header = wire.pack_header(sec, nanosec, wire.header_frame_id(header))
@@ -348,6 +353,15 @@ class ControllerNode(RwNode):
         if not math.isfinite(u) or abs(u) > self.ctrl.u_max:   # pragma: no cover - saturated above
             u = 0.0
         self.publish_result(header, seq, u, st, sec, nanosec)
+
+    def _check_clock(self, stamp_s: float, now_s: float) -> None:
+        """The first stamped state from the topic: on this node's clock? Said once (log,
+        /diagnostics ``other_clock``) when not (rwpend_ros.health.other_clock)."""
+        self._clock_checked = True
+        self.other_clock = other_clock(stamp_s, now_s)
+        if self.other_clock:
+            self.get_logger().warn(self.other_clock)
+            self.publish_diagnostics()
 
     def publish_result(self, header: bytes, seq: int, u: float, st, sec: int, nanosec: int) -> bytes | None:
         """What the law gave for state ``seq``: ``command`` (with the state's header), the
@@ -479,6 +493,7 @@ class ControllerNode(RwNode):
                 'malformed_states': self.malformed_states,
                 'friction_compensation': self.ctrl.config.friction_compensation,
                 'state_order': self.sub_state.summary() if self.sub_state is not None else 'in the loop',
+                'other_clock': self.other_clock or '',
                 'controller_id': format_id(self.controller_id),
             })
 

@@ -115,3 +115,22 @@ class LoopHealth:
                 'loop_timeout_samples': str(self.timeouts), 'loop_dead': str(self.dead),
                 'loop_deaths': str(self.deaths), 'loop_longest_dead_s': f'{self.longest_dead_s:.3f}',
                 'loop_first_check': self.verdict or 'pending'}
+
+
+#: a sample stamped further than this from a node's clock is on another clock (s)
+OTHER_CLOCK_S = 60.0
+
+
+def other_clock(stamp_s: float, now_s: float, limit_s: float = OTHER_CLOCK_S) -> str | None:
+    """Why a sample stamped ``stamp_s`` is not on the clock of the node that took it at
+    ``now_s`` (both in s), or None. A node on the wall clock beside a lockstep simulator (its
+    stamps: the sim time) runs its watchdogs on the wall clock: a controller started one by one
+    without ``use_sim_time`` declared a stale state at most samples of such a run, and the run
+    crawled (docs/architecture.md, "Lockstep and time")."""
+    off = now_s - stamp_s
+    if abs(off) <= limit_s:
+        return None
+    where = 'behind' if off > 0 else 'ahead of'
+    return (f'samples are stamped {stamp_s:.3f} s, {abs(off):.0f} s {where} this node\'s clock: a '
+            'lockstep simulator\'s sim time (start this node with -p use_sim_time:=true, as ./rwpend up '
+            '--lockstep does) or another host\'s clock out of step; this node\'s watchdogs run on its own clock')

@@ -48,3 +48,13 @@ def test_bad_settings_refused():
         LoopHealth(0.0)
     with pytest.raises(ValueError):
         LoopHealth(0.001, late_limit=2.0)
+
+
+def test_a_sample_on_another_clock_is_said_with_what_to_do():
+    from rwpend_ros.health import other_clock
+    wall = 1_796_660_000.0
+    assert other_clock(wall - 0.004, wall) is None and other_clock(wall + 30.0, wall) is None
+    why = other_clock(12.345, wall)                   # a lockstep simulator's sim time
+    assert why.startswith('samples are stamped 12.345 s, 1796659988 s behind this node\'s clock')
+    assert 'use_sim_time:=true' in why
+    assert 'ahead of' in other_clock(wall + 120.0, wall)
