@@ -358,7 +358,7 @@ class ControllerNode(RwNode):
         """The first stamped state from the topic: on this node's clock? Said once (log,
         /diagnostics ``other_clock``) when not (rwpend_ros.health.other_clock)."""
         self._clock_checked = True
-        self.other_clock = other_clock(stamp_s, now_s)
+        self.other_clock = other_clock(stamp_s, now_s, bool(self.get_parameter('use_sim_time').value))
         if self.other_clock:
             self.get_logger().warn(self.other_clock)
             self.publish_diagnostics()

@@ -121,16 +121,23 @@ class LoopHealth:
 OTHER_CLOCK_S = 60.0
 
 
-def other_clock(stamp_s: float, now_s: float, limit_s: float = OTHER_CLOCK_S) -> str | None:
+def other_clock(stamp_s: float, now_s: float, sim_time: bool = False,
+                limit_s: float = OTHER_CLOCK_S) -> str | None:
     """Why a sample stamped ``stamp_s`` is not on the clock of the node that took it at
-    ``now_s`` (both in s), or None. A node on the wall clock beside a lockstep simulator (its
-    stamps: the sim time) runs its watchdogs on the wall clock: a controller started one by one
-    without ``use_sim_time`` declared a stale state at most samples of such a run, and the run
-    crawled (docs/architecture.md, "Lockstep and time")."""
+    ``now_s`` (both in s; ``sim_time``: the node has ``use_sim_time``), or None. A node on the
+    wall clock beside a lockstep simulator (its stamps: the sim time) runs its watchdogs on the
+    wall clock: a controller started one by one without ``use_sim_time`` declared a stale state
+    at most samples of such a run, and the run crawled (docs/architecture.md, "Lockstep and
+    time"); a node on sim time beside a plant on the wall clock has no time until a ``/clock``."""
     off = now_s - stamp_s
     if abs(off) <= limit_s:
         return None
     where = 'behind' if off > 0 else 'ahead of'
-    return (f'samples are stamped {stamp_s:.3f} s, {abs(off):.0f} s {where} this node\'s clock: a '
-            'lockstep simulator\'s sim time (start this node with -p use_sim_time:=true, as ./rwpend up '
-            '--lockstep does) or another host\'s clock out of step; this node\'s watchdogs run on its own clock')
+    head = f'samples are stamped {stamp_s:.3f} s, {abs(off):.0f} s {where} this node\'s clock: '
+    if sim_time:
+        cause = ('this node is on sim time (use_sim_time) and the plant is not (start this node without '
+                 'use_sim_time, or the simulator with lockstep:=true)')
+    else:
+        cause = ('a lockstep simulator\'s sim time (start this node with -p use_sim_time:=true, as ./rwpend up '
+                 '--lockstep does)')
+    return head + cause + ' or another host\'s clock out of step; this node\'s watchdogs run on its own clock'

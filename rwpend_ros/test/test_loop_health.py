@@ -58,3 +58,6 @@ def test_a_sample_on_another_clock_is_said_with_what_to_do():
     assert why.startswith('samples are stamped 12.345 s, 1796659988 s behind this node\'s clock')
     assert 'use_sim_time:=true' in why
     assert 'ahead of' in other_clock(wall + 120.0, wall)
+    # a node on sim time (no /clock yet: its time 0) beside a plant on the wall clock
+    why = other_clock(wall, 0.0, sim_time=True)
+    assert 'ahead of' in why and 'without use_sim_time' in why
