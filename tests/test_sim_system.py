@@ -56,7 +56,11 @@ def _run(tmp_path, env, params, n, tag):
 
 
 def test_realtime_stream_rate_and_seq(tmp_path, ros_env):
-    rows = _run(tmp_path, ros_env, [], 3000, 'rt')
+    # a Python client that falls behind the 1 kHz stream on a loaded host (810 Hz in one CI run)
+    # answers samples more than 3 old, which the rig's command timeout refuses (u = 0: its safety
+    # rule, tested in the loop tier); here the timeout is long so that the test asks only whether
+    # the stream is paced, complete and in order, and whether commands reach the wheel
+    rows = _run(tmp_path, ros_env, ['-p', 'command_timeout_samples:=100000'], 3000, 'rt')
     seq = rows[:, 1].astype(np.int64)
     assert seq[0] == 0 and np.all(np.diff(seq) == 1), 'every sample, in order'
     assert np.all(np.diff(rows[:, 4]) == 1_000_000), 'stamps on the h = 1 ms grid'
