@@ -205,7 +205,11 @@ def run_stack(stack: Stack, specs, files, on_started=None) -> int:
         # stack that never starts
         bound = None if a.duration is None else 120.0 + (20.0 if a.lockstep else 1.5) * a.duration
         status = launcher.run(bound, on_started=on_started)
-        print(f'rwpend: stopped ({launcher.reason})', flush=True)
+        why = launcher.reason
+        if why == 'duration':   # the plant ends a run of --duration itself: this is the bound
+            why = (f'{bound:.0f} s without the end of the {a.duration:g} s run: the plant never started '
+                   'it or never ended it (its log above says why)')
+        print(f'rwpend: stopped ({why})', flush=True)
         return judge_run(a, specs, launcher.exit_codes, status, time.monotonic() - t0,
                          interrupted=launcher.reason == 'signal')
 

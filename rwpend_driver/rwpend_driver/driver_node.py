@@ -65,8 +65,11 @@ from rwpend_ros.trace import tracer
 from . import link_health
 from . import protocol as P
 from .link import MASK32, DriverLink, LinkConfig
+from .port import absent_port_hint, serial_ports_present
 
 RO = partial(ParamSpec, read_only=True)
+#: s between the lines that say the driver is still waiting for its rig (autostart retrying)
+RETRY_NOTE_S = 30.0
 
 #: The driver's parameters, all read-only (set at start): name, default, description, bounds
 #: (those of :meth:`rwpend_driver.link.LinkConfig.errors`, which judges them again).
@@ -253,8 +256,7 @@ class DriverNode(LifecycleNode):
         if not ok:
             self.configure_failures += 1
             self.last_configure_error = self.link.error
-            if self.configure_failures == 1 or self.link.fatal:
-                self.get_logger().error(f'configure failed: {self.link.error}')
+            self._say_configure_failed()
             self.link.close()
             self.link = None
             return TransitionCallbackReturn.FAILURE
@@ -264,6 +266,23 @@ class DriverNode(LifecycleNode):
         self.thread.start()
         self.lifecycle = 'inactive'
         return TransitionCallbackReturn.SUCCESS
+
+    def _say_configure_failed(self) -> None:
+        """The first failure to open the link, with the reason and, for a device path that does
+        not exist, the serial ports there are; then, while autostart retries, one line every
+        :data:`RETRY_NOTE_S` s, so that a stack waiting for its rig is never silent."""
+        now = time.monotonic()
+        retrying = self.p['autostart'] and not self.link.fatal
+        if self.configure_failures == 1 or self.link.fatal:
+            self.first_failure_at = self.retry_note_at = now
+            hint = absent_port_hint(self.p['port'], serial_ports_present())
+            again = (f'; retrying every {self.p["connect_timeout"] + 1.0:g} s until the rig answers '
+                     '(Ctrl-C to stop)') if retrying else ''
+            self.get_logger().error(f'configure failed: {self.link.error}' + (f' ({hint})' if hint else '') + again)
+        elif retrying and now - self.retry_note_at >= RETRY_NOTE_S:
+            self.retry_note_at = now
+            self.get_logger().warning(f'no rig at {self.p["port"]} yet: {self.configure_failures} attempts in '
+                                      f'{now - self.first_failure_at:.0f} s, the last: {self.link.error}')
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.link.set_active(not self.estop)    # a latched e-stop keeps the amplifier off

@@ -108,3 +108,21 @@ def serial_opener(port: str, baud: int) -> FdPort:
     import serial  # pyserial; imported here so the pure tests need no serial port
     s = serial.Serial(port, baud, timeout=0, write_timeout=0, exclusive=True)
     return FdPort(s.fileno(), owner=s)
+
+
+def absent_port_hint(port: str, present: list[str]) -> str:
+    """What to tell the user when ``port`` could not be opened: '' unless ``port`` is a path
+    that does not exist (a URL such as ``socket://`` or ``rfc2217://`` is pyserial's to judge);
+    else the serial ports ``present`` (:func:`serial_ports_present`), or that there is none."""
+    if not port.startswith('/') or os.path.exists(port):
+        return ''
+    if present:
+        return f'{port} does not exist; serial ports present: {", ".join(sorted(present))}'
+    return (f'{port} does not exist and no serial port is present: is the rig plugged in and powered '
+            '(or, without a rig, ./rwpend emulate --link PATH and --plant serial:PATH)?')
+
+
+def serial_ports_present() -> list[str]:
+    """The serial devices this host has now (pyserial's listing: USB and on-board ports)."""
+    from serial.tools import list_ports
+    return [p.device for p in list_ports.comports()]

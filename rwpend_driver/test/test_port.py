@@ -7,7 +7,7 @@ import tty
 
 import pytest
 
-from rwpend_driver.port import FdPort, serial_opener
+from rwpend_driver.port import FdPort, absent_port_hint, serial_opener, serial_ports_present
 
 
 @pytest.fixture
@@ -86,3 +86,13 @@ def test_serial_opener_on_a_pty(pty_pair):
         assert port.write(b'\x01\x02') == 2 and os.read(master, 10) == b'\x01\x02'
     finally:
         port.close()
+
+
+def test_absent_port_hint_names_the_ports_there_are(tmp_path):
+    missing = str(tmp_path / 'ttyACM9')
+    assert absent_port_hint(missing, ['/dev/ttyUSB0', '/dev/ttyACM0']) == \
+        f'{missing} does not exist; serial ports present: /dev/ttyACM0, /dev/ttyUSB0'
+    assert 'no serial port is present' in absent_port_hint(missing, [])
+    assert absent_port_hint(str(tmp_path), []) == '', 'a path that exists: the open error says it'
+    assert absent_port_hint('socket://rig.lab:7000', []) == '', "a URL is pyserial's to judge"
+    assert all(isinstance(p, str) for p in serial_ports_present())
