@@ -4,6 +4,7 @@ real time, and lockstep determinism (two identical runs give identical counts) -
 from __future__ import annotations
 
 import json
+import time
 import subprocess
 import sys
 import textwrap
@@ -79,3 +80,28 @@ def test_lockstep_runs_are_identical(tmp_path, ros_env):
     assert a.shape == b.shape == (2000, 5)
     assert np.array_equal(a[:, 1:], b[:, 1:]), 'identical seq, counts and stamps'
     assert np.abs(a[:, 2]).max() > 10 and np.abs(a[:, 3]).max() > 100
+
+
+def test_lockstep_runs_on_when_its_controller_is_gone(tmp_path, ros_env):
+    """A lockstep simulator whose external controller ended: after the loop is declared dead
+    and no node publishes ``command`` any more, the samples no longer wait ``lockstep_timeout``
+    (0.5 s of wall time each: a 5 s run would take 33 min); the run ends at u = 0, the loop
+    reported dead (exit status 3)."""
+    from rwpend_ros.health import EXIT_LOOP_DEAD
+    log = tmp_path / 'sim.log'
+    t0 = time.monotonic()
+    with open(log, 'w') as f:
+        sim = subprocess.Popen([RWPEND, 'sim', '-p', 'lockstep:=true', '-p', 'duration:=5.0',
+                                '-p', 'start.encoders_subscribers:=1'], env=ros_env, stdout=f, stderr=subprocess.STDOUT)
+        try:
+            subprocess.run([PY, '-c', DRIVER, str(tmp_path / 'rows.json'), '1000'], env=ros_env,
+                           timeout=90, check=True)
+            code = sim.wait(timeout=120)
+        finally:
+            if sim.poll() is None:
+                sim.kill()
+    wall = time.monotonic() - t0
+    text = log.read_text()
+    print(f'measured: 5 s lockstep run, controller gone after 1 s: {wall:.1f} s of wall time')
+    assert code == EXIT_LOOP_DEAD, text[-3000:]
+    assert 'no node publishes command any more' in text and 'the loop is dead' in text, text[-3000:]

@@ -36,6 +36,7 @@ from rwpend_ros.sched import thread_priority_spec
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.diagnostics import publish_diagnostic
+from rwpend_ros.health import other_clock
 from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
@@ -125,6 +126,8 @@ class EstimatorNode(RwNode):
         self._resyncs_seen = 0
         self.last_drive_seq: int | None = None   # newest sample answered by a non-zero command
         self.refused_resets = 0
+        self.other_clock = None      # why the samples' stamps are not on this node's clock (checked once)
+        self._clock_checked = False
 
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.add_post_set_parameters_callback(self.on_parameters_set)
@@ -218,8 +221,10 @@ class EstimatorNode(RwNode):
 
     def on_encoders(self, msg: EncoderCounts) -> None:
         st = msg.header.stamp
-        self.sample(Sample(wire.pack_header(st.sec, st.nanosec, msg.header.frame_id), int(msg.seq),
-                           msg.pendulum_counts, msg.motor_counts))
+        header = wire.pack_header(st.sec, st.nanosec, msg.header.frame_id)
+        if not self._clock_checked:
+            self._check_clock(header)
+        self.sample(Sample(header, int(msg.seq), msg.pendulum_counts, msg.motor_counts))
 
     def on_encoders_raw(self, data: bytes) -> None:
         if self.sample_time is not None:
@@ -232,7 +237,22 @@ class EstimatorNode(RwNode):
             return
         if self.trace is not None:
             self.trace('est.rx', msg.seq)
+        if not self._clock_checked:
+            self._check_clock(msg.header)
         self.sample(msg)
+
+    def _check_clock(self, header: bytes) -> None:
+        """The first stamped sample from the topic: on this node's clock? Said once (log,
+        /diagnostics ``other_clock``) when not (rwpend_ros.health.other_clock): the estimator's
+        /diagnostics would be stamped on another clock than its samples."""
+        sec, nanosec = wire.header_stamp(header)
+        if not (sec or nanosec):
+            return
+        self._clock_checked = True
+        now = self.get_clock().now().nanoseconds * 1e-9
+        self.other_clock = other_clock(sec + nanosec * 1e-9, now, bool(self.get_parameter('use_sim_time').value))
+        if self.other_clock:
+            self.get_logger().warn(self.other_clock)
 
     def sample(self, msg: 'Sample') -> None:
         """Sample k is estimated with the command that answered sample k-1 (held over
@@ -333,6 +353,7 @@ class EstimatorNode(RwNode):
                 'plant_restarts': self.align.restarts,
                 'switches': self.switches,
                 'refused_resets': self.refused_resets,
+                'other_clock': self.other_clock or '',
                 'encoders_order': self.sub_enc.summary() if self.sub_enc is not None else 'in the loop',
                 'command_order': self.sub_cmd.summary() if self.sub_cmd is not None else 'in the loop',
             })

@@ -38,6 +38,7 @@ Every callback of a hosted node (parameters, services, timers) runs holding the 
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import threading
@@ -55,6 +56,8 @@ CLOCK_EVERY = 10
 #: lockstep without an external controller: samples run per hold of the loop's lock (a hosted
 #: callback -- a parameter change, a service call, a timer -- runs between two batches)
 LOCKSTEP_BATCH = 10
+#: lockstep, the loop dead: wall s between two looks at the graph for a publisher of command
+GRAPH_CHECK_S = 0.25
 
 
 class LoopLock:
@@ -210,6 +213,8 @@ class Host:
                             if n.has_parameter('diagnostics_period') else round(1.0 / self.h))
                            for n in (sim, self.est, self.ctrl) if n is not None]
         self.stop = threading.Event()
+        self._command_publisher = True      # lockstep: a publisher of command (checked when dead)
+        self._graph_checked_at = -math.inf
         self.pacer = None
         self.thread = threading.Thread(target=self._run, name='loop', daemon=True)
 
@@ -446,6 +451,8 @@ class Host:
         (``lockstep_timeout`` of wall time; sample 0 ``start.first_command_timeout``)."""
         sim = self.sim
         limit = sim.p['lockstep_timeout'] if k else sim.p['start.first_command_timeout']
+        if sim.health.dead and not self._command_publisher_there():
+            limit = 0.0        # the controller is gone: the run goes on at u = 0 without waiting
         deadline = time.monotonic() + limit
         while sim.core.u_seq < k and not self.stop.is_set():
             remaining = deadline - time.monotonic()
@@ -460,6 +467,26 @@ class Host:
                 self._after_interval(was)
                 return
             self.lock.lock.wait(remaining)
+
+    def _command_publisher_there(self) -> bool:
+        """Lockstep, the loop dead: is there still a publisher of ``command`` (a stalled
+        controller, which may come back) or none (killed, ended: its samples would each wait
+        ``lockstep_timeout`` in vain, 0.5 s of wall time per simulated ms)? Asked of the ROS graph
+        at most every :data:`GRAPH_CHECK_S` s; the change is said once each way."""
+        now = time.monotonic()
+        if now - self._graph_checked_at >= GRAPH_CHECK_S:
+            self._graph_checked_at = now
+            sim = self.sim
+            there = sim.count_publishers(sim.resolve_topic_name('command')) > 0
+            if there != self._command_publisher:
+                self._command_publisher = there
+                if there:
+                    sim.get_logger().info('lockstep: a publisher of command is back; each sample waits '
+                                          'for its command again')
+                else:
+                    sim.get_logger().warn('lockstep: the loop is dead and no node publishes command any '
+                                          'more; the run goes on at u = 0 without waiting for one')
+        return self._command_publisher
 
     # ------------------------------------------------------------------ life
     def start(self) -> None:

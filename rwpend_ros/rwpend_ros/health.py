@@ -47,6 +47,7 @@ class LoopHealth:
         self.dead = False
         self.deaths = 0            # times the loop was declared dead
         self.longest_dead_s = 0.0
+        self.longest_dead_samples = 0
         self.checked = False       # the first-window verdict was given
         self.window_late = 0
         self.window_timeouts = 0
@@ -84,7 +85,8 @@ class LoopHealth:
         if timed_out:
             self.timeouts += 1
             self.timeout_run += 1
-            self.longest_dead_s = max(self.longest_dead_s, self.timeout_run * self.h)
+            self.longest_dead_samples = max(self.longest_dead_samples, self.timeout_run)
+            self.longest_dead_s = self.longest_dead_samples * self.h
             if not self.dead and self.timeout_run >= self.dead_after:
                 self.dead = True
                 self.deaths += 1
@@ -104,16 +106,25 @@ class LoopHealth:
                     event = event or 'slow'
         return event
 
-    def dead_reason(self) -> str:
-        return (f'the loop is dead: no fresh command for {self.timeout_run * self.h:.1f} s (the '
-                'estimator or the controller does not answer); the motor is held at zero')
+    def dead_reason(self, lockstep_h: float | None = None) -> str:
+        """Why the loop is dead. ``lockstep_h``: the sample period of a lockstep run, whose
+        samples without a command need not each have cost ``h`` of wall time (the simulator runs
+        on without waiting when no controller is left): said in samples and simulated s."""
+        if lockstep_h is not None:
+            span = f'{self.timeout_run} samples ({self.timeout_run * lockstep_h:.3f} s simulated)'
+        else:
+            span = f'{self.timeout_run * self.h:.1f} s'
+        return (f'the loop is dead: no fresh command for {span} (the estimator or the controller '
+                'does not answer); the motor is held at zero')
 
-    def values(self) -> dict[str, str]:
-        """Key-values for /diagnostics."""
+    def values(self, lockstep_h: float | None = None) -> dict[str, str]:
+        """Key-values for /diagnostics (``lockstep_h``: as in :meth:`dead_reason`, the longest
+        dead span in simulated s)."""
         frac = self.late / self.samples if self.samples else 0.0
+        longest = self.longest_dead_s if lockstep_h is None else self.longest_dead_samples * lockstep_h
         return {'loop_late_commands': str(self.late), 'loop_late_percent': f'{100 * frac:.3f}',
                 'loop_timeout_samples': str(self.timeouts), 'loop_dead': str(self.dead),
-                'loop_deaths': str(self.deaths), 'loop_longest_dead_s': f'{self.longest_dead_s:.3f}',
+                'loop_deaths': str(self.deaths), 'loop_longest_dead_s': f'{longest:.3f}',
                 'loop_first_check': self.verdict or 'pending'}
 
 

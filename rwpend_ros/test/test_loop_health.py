@@ -61,3 +61,15 @@ def test_a_sample_on_another_clock_is_said_with_what_to_do():
     # a node on sim time (no /clock yet: its time 0) beside a plant on the wall clock
     why = other_clock(wall, 0.0, sim_time=True)
     assert 'ahead of' in why and 'without use_sim_time' in why
+
+
+def test_lockstep_dead_span_is_said_in_samples_and_simulated_seconds():
+    # lockstep: h is lockstep_timeout (the wall time a sample without a command may cost), but a
+    # run whose controller is gone does not wait: the span is said on the simulated clock
+    h = LoopHealth(0.5, dead_after_s=2.0, check_after_s=100.0)
+    h.command()
+    for _ in range(1500):
+        h.sample(True, True)
+    assert h.dead and '1500 samples (1.500 s simulated)' in h.dead_reason(lockstep_h=0.001)
+    assert h.values(lockstep_h=0.001)['loop_longest_dead_s'] == '1.500'
+    assert h.values()['loop_longest_dead_s'] == '750.000' and '750.0 s' in h.dead_reason()

@@ -13,7 +13,9 @@ modes (parameter ``lockstep``):
 * real time: samples on the wall clock, like the rig (the loop's pacer, absolute deadlines);
 * lockstep: publishes ``/clock``; sample k waits for the command answering seq k (from the
   loop's own controller at once; from one outside ``lockstep_timeout`` s of wall time, then u = 0
-  for that sample, counted); runs as fast as the loop allows; identical inputs give identical
+  for that sample, counted -- not at all once the loop is dead and no node publishes ``command``
+  any more: a controller that ended does not make the rest of the run crawl); runs as fast as
+  the loop allows; identical inputs give identical
   outputs. With ``lockstep_recorder_window`` W > 0 the loop also keeps within W samples of a
   recorder outside: sample k goes out once the recorder has reported (``recorder/progress``,
   rosgraph_msgs/Clock, every :data:`rwpend_ros.qos.RECORDER_PROGRESS_EVERY` samples) the
@@ -383,7 +385,7 @@ class SimNode(RwNode):
             return
         log = self.get_logger()
         if event == 'dead':
-            log.error(self.health.dead_reason())
+            log.error(self.health.dead_reason(self.h if self.lockstep else None))
         elif event == 'alive':
             log.info('the loop is answering again: commands are fresh')
         elif event == 'slow' and not self.lockstep:
@@ -394,7 +396,7 @@ class SimNode(RwNode):
     def exit_status(self) -> int:
         """:data:`rwpend_ros.health.EXIT_LOOP_DEAD` when the loop was dead at the end."""
         if self.health.dead:
-            print(f'sim: {self.health.dead_reason()} (at the end of the run)', file=sys.stderr, flush=True)
+            print(f'sim: {self.health.dead_reason(self.h if self.lockstep else None)} (at the end of the run)', file=sys.stderr, flush=True)
             return EXIT_LOOP_DEAD
         return 0
 
@@ -420,7 +422,7 @@ class SimNode(RwNode):
         if self.core.estop:
             level, msg = DiagnosticStatus.ERROR, 'e-stop latched: motor at zero'
         elif self.health.dead:
-            level, msg = DiagnosticStatus.ERROR, self.health.dead_reason()
+            level, msg = DiagnosticStatus.ERROR, self.health.dead_reason(self.h if self.lockstep else None)
         elif self.core.timed_out:
             level, msg = DiagnosticStatus.WARN, (f'command timeout: no command for '
                                                  f'{self.core.timeout_samples} samples, u = 0')
@@ -456,7 +458,7 @@ class SimNode(RwNode):
             'command_order': self.sub_cmd.summary() if self.sub_cmd is not None else 'in the loop',
             **self.claim.values(),
             'truth_vs_model': self.truth_differs or 'same',
-            **self.health.values(),
+            **self.health.values(self.h if self.lockstep else None),
         }
         publish_diagnostic(self.pub_diag, self.diagnostics_stamp_ns(),
                            f'{self.get_namespace().rstrip("/")}/sim: plant', self.get_namespace(), level, msg,
