@@ -104,6 +104,8 @@ class ControlHost:
             return
         now_ns = ctrl.get_clock().now().nanoseconds
         sec, nanosec = wire.header_stamp(header)
+        if not ctrl._clock_checked and (sec or nanosec):   # on this process's clock? (said once)
+            ctrl._check_clock(sec + nanosec * 1e-9, now_ns * 1e-9)
         if sec == 0 and nanosec == 0:              # an unstamped sample: stamped on arrival
             sec, nanosec = divmod(now_ns, 1_000_000_000)
             header = wire.pack_header(sec, nanosec, wire.header_frame_id(header))
