@@ -123,6 +123,10 @@ def absent_port_hint(port: str, present: list[str]) -> str:
 
 
 def serial_ports_present() -> list[str]:
-    """The serial devices this host has now (pyserial's listing: USB and on-board ports)."""
-    from serial.tools import list_ports
-    return [p.device for p in list_ports.comports()]
+    """The serial devices this host has now (pyserial's listing: USB and on-board ports); []
+    when the listing fails (it only adds to an error message)."""
+    try:
+        from serial.tools import list_ports
+        return [p.device for p in list_ports.comports()]
+    except Exception:  # noqa: BLE001 - a hint, never a second failure
+        return []
