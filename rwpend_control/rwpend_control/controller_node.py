@@ -63,8 +63,7 @@ from rwpend_ros import wire
 from rwpend_ros.claim import format_id
 from rwpend_ros.trace import tracer
 from rwpend_ros.diagnostics import publish_diagnostic
-from rwpend_ros.health import other_clock
-from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription
+from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription, say_other_clock
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.qos import QOS_CONTROL_LATEST, QOS_CONTROL_PUB, QOS_LATCHED, QOS_STATUS
 from rwpend_ros.runner import run_node
@@ -358,9 +357,8 @@ class ControllerNode(RwNode):
         """The first stamped state from the topic: on this node's clock? Said once (log,
         /diagnostics ``other_clock``) when not (rwpend_ros.health.other_clock)."""
         self._clock_checked = True
-        self.other_clock = other_clock(stamp_s, now_s, bool(self.get_parameter('use_sim_time').value))
+        self.other_clock = say_other_clock(self, stamp_s, now_s)
         if self.other_clock:
-            self.get_logger().warn(self.other_clock)
             self.publish_diagnostics()
 
     def publish_result(self, header: bytes, seq: int, u: float, st, sec: int, nanosec: int) -> bytes | None:

@@ -36,8 +36,7 @@ from rwpend_ros.sched import thread_priority_spec
 from rwpend_ros import wire
 from rwpend_ros.trace import tracer
 from rwpend_ros.diagnostics import publish_diagnostic
-from rwpend_ros.health import other_clock
-from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription
+from rwpend_ros.nodes import RwNode, SlackTimer, local_subscription, say_other_clock
 from rwpend_ros.params import ConfigError, ParameterTable, declare_rig
 from rwpend_ros.paramspec import ParamSpec
 from rwpend_ros.qos import QOS_CONTROL, QOS_CONTROL_PUB, QOS_STATUS
@@ -249,10 +248,7 @@ class EstimatorNode(RwNode):
         if not (sec or nanosec):
             return
         self._clock_checked = True
-        now = self.get_clock().now().nanoseconds * 1e-9
-        self.other_clock = other_clock(sec + nanosec * 1e-9, now, bool(self.get_parameter('use_sim_time').value))
-        if self.other_clock:
-            self.get_logger().warn(self.other_clock)
+        self.other_clock = say_other_clock(self, sec + nanosec * 1e-9, self.get_clock().now().nanoseconds * 1e-9)
 
     def sample(self, msg: 'Sample') -> None:
         """Sample k is estimated with the command that answered sample k-1 (held over

@@ -46,8 +46,7 @@ class LoopHealth:
         self.timeout_run = 0       # consecutive such samples now
         self.dead = False
         self.deaths = 0            # times the loop was declared dead
-        self.longest_dead_s = 0.0
-        self.longest_dead_samples = 0
+        self.longest_dead_samples = 0   # the longest run of such samples
         self.checked = False       # the first-window verdict was given
         self.window_late = 0
         self.window_timeouts = 0
@@ -86,7 +85,6 @@ class LoopHealth:
             self.timeouts += 1
             self.timeout_run += 1
             self.longest_dead_samples = max(self.longest_dead_samples, self.timeout_run)
-            self.longest_dead_s = self.longest_dead_samples * self.h
             if not self.dead and self.timeout_run >= self.dead_after:
                 self.dead = True
                 self.deaths += 1
@@ -105,6 +103,10 @@ class LoopHealth:
                 if frac > self.late_limit or self.window_timeouts:
                     event = event or 'slow'
         return event
+
+    @property
+    def longest_dead_s(self) -> float:
+        return self.longest_dead_samples * self.h
 
     def dead_reason(self, lockstep_h: float | None = None) -> str:
         """Why the loop is dead. ``lockstep_h``: the sample period of a lockstep run, whose

@@ -117,6 +117,17 @@ class RwNode(LockedCallbacks, Node):
         super().__init__(node_name, **kwargs)
 
 
+def say_other_clock(node, stamp_s: float, now_s: float) -> str | None:
+    """The first stamped sample a node takes from a topic, ``stamp_s``, against its clock
+    ``now_s``: :func:`rwpend_ros.health.other_clock` for the node's ``use_sim_time``, said once
+    in its log when not None (the caller keeps it for /diagnostics ``other_clock``)."""
+    from rwpend_ros.health import other_clock
+    why = other_clock(stamp_s, now_s, bool(node.get_parameter('use_sim_time').value))
+    if why:
+        node.get_logger().warn(why)
+    return why
+
+
 class LoopSubscription:
     """What :func:`local_subscription` made: the rclpy subscription and the order gate
     (:class:`rwpend_ros.order.OrderGate` or :class:`~rwpend_ros.order.SourceGates`, None for a
