@@ -17,7 +17,8 @@ samples and ms, fuzz counts, loss/delay survived).
   sends, on the simulator and through the serial driver (emulator).
 
 Lockstep runs use ``lockstep_timeout`` = 5 ms, so a dead loop costs 5 ms of wall time per
-simulated sample (the pendulum can fall in a few seconds) instead of 0.5 s.
+simulated sample (the pendulum can fall in a few seconds) instead of 0.5 s; the relay's, whose
+loop stays alive, 30 ms (RELAY_LOCKSTEP_TIMEOUT).
 """
 from __future__ import annotations
 
@@ -47,6 +48,11 @@ PY = str(ROOT / '.venv' / 'bin' / 'python') if (ROOT / '.venv' / 'bin' / 'python
 H = 0.001
 NS = '/rwpend'
 LOCKSTEP_TIMEOUT = 0.005
+#: the relay's lockstep runs wait longer: the loop is alive, a dropped state costs one timeout, and
+#: a command that comes back across four processes after the timeout is answered too late -- with
+#: 5 ms, a slow 2-core host timed out most samples (6 s took 27 s, 27 % at zero, the pendulum
+#: fell): the outcome was the host's, not the loop's
+RELAY_LOCKSTEP_TIMEOUT = 0.03
 
 
 # ---------------------------------------------------------------------------------- helpers
@@ -496,7 +502,8 @@ RELAY = textwrap.dedent('''
 def relay_run(tmp_path, env, lockstep, drop, delay, duration, sim_exits=(0,)):
     bag = tmp_path / 'bag'
     P = Procs(tmp_path, env)
-    sim, est, ctl = loop_params(lockstep, **{'initial.theta': UPRIGHT, 'duration': duration})
+    extra = {'lockstep_timeout': RELAY_LOCKSTEP_TIMEOUT} if lockstep else {}
+    sim, est, ctl = loop_params(lockstep, **{'initial.theta': UPRIGHT, 'duration': duration, **extra})
     counts = tmp_path / 'relay.json'
     try:
         P.start('recorder', [RWPEND, 'record', '-o', str(bag), '--all'])
@@ -506,8 +513,10 @@ def relay_run(tmp_path, env, lockstep, drop, delay, duration, sim_exits=(0,)):
         P.wait_log('relay', 'relay ready', 30)
         P.node('sim', 'sim', sim)
         # lockstep across five processes: the wall time is the host's (37 s did not suffice for
-        # 6 s simulated on a slow, loaded 2-core host); only a run that never ends fails here
-        end = time.monotonic() + 25 + (8 * duration if lockstep else duration)
+        # 6 s simulated on a slow, loaded 2-core host), plus a lockstep timeout per dropped
+        # state; only a run that never ends fails here
+        waits = drop * duration / H * RELAY_LOCKSTEP_TIMEOUT
+        end = time.monotonic() + 25 + (8 * duration + waits if lockstep else duration)
         while P.procs['sim'].poll() is None and time.monotonic() < end:   # the sim stops at duration
             time.sleep(0.2)
         sim_exit = P.procs['sim'].poll()
@@ -531,7 +540,7 @@ def relay_run(tmp_path, env, lockstep, drop, delay, duration, sim_exits=(0,)):
     return m, truth, cmd
 
 
-@pytest.mark.timeout(150)
+@pytest.mark.timeout(200)
 def test_lockstep_relay_dropping_10_percent_of_state_balance_holds(tmp_path, ros_env):
     m, truth, cmd = relay_run(tmp_path, ros_env, lockstep=True, drop=0.10, delay=0.0, duration=6.0)
     print('measured:', json.dumps(m))

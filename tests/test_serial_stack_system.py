@@ -14,10 +14,14 @@ import numpy as np
 import pytest
 
 from rwpend_bag.analysis import _decode, analyze, wrap
+from rwpend_bag.judge import SOURCE_RIG, judge, read_run
 from rwpend_bag.reader import read_bag
 
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
+#: the late share (device's applied: command_seq < seq - 1) above which a lost balance is the
+#: host's, not the stack's: 10x the issue's target for this path (0.2 %)
+LATE_SHARE_HOST_BEHIND = 0.02
 
 
 #: --duration per layout: the loop swings up (< 8 s; ~4 s measured) and balances over the last 3 s;
@@ -48,6 +52,11 @@ def test_stack_on_the_emulated_rig_swings_up_and_balances(tmp_path, ros_env, lay
         t.type for t in b.topics.values()}, 'the plant is the driver, not the simulator'
     u = _decode(b, '/rwpend/command')['u']
     assert np.all(np.isfinite(u)) and np.abs(u).max() <= 10.0
+    # the independent reader (rosbags) on the device's own report (applied): never driven by a
+    # stale command, every gap of the bag in the recording report -- whatever the host's speed
+    v = judge(read_run(bag))
+    assert v.source == SOURCE_RIG and v.timed_samples > 3000, (v.source, v.timed_samples, v.problems)
+    assert v.unsafe_samples == 0 and not v.unaccounted, v.problems
     if layout:
         # separate processes exchange every sample over DDS: on a 2-core VM 43-58 % of the
         # samples were late (PERFORMANCE.md, "The loop"), and the device zeroes a command 3
@@ -56,9 +65,18 @@ def test_stack_on_the_emulated_rig_swings_up_and_balances(tmp_path, ros_env, lay
         assert len(u) > 5000 and b.topics['/rwpend/applied'].count > 5000
         return
     m = analyze(bag)
-    assert m['swing_up_time_s'] is not None and m['swing_up_time_s'] < 8.0, m
     st = _decode(b, '/rwpend/state')
     t = (st['_stamp_ns'] - st['_stamp_ns'][0]) / 1e9
     err = np.abs(wrap(st['theta'] - np.pi))
     last = t > t[-1] - 3.0
-    assert err[last].max() < 0.2, 'balanced over the last 3 s'
+    balanced = m['swing_up_time_s'] is not None and m['swing_up_time_s'] < 8.0 and err[last].max() < 0.2
+    late = v.late_samples / v.timed_samples
+    if not balanced and late > LATE_SHARE_HOST_BEHIND:
+        # the device held a command that did not answer the previous sample in this share of the
+        # samples: the PC fell behind the rate (a host figure: PERFORMANCE.md, make bench), the
+        # outcome is not the stack's to answer for
+        pytest.xfail(f'this PC fell behind the sample rate: {100 * late:.1f} % of the samples late '
+                     f'({v.late_samples} of {v.timed_samples}), {v.zero_samples} at zero; swing-up '
+                     f'{m["swing_up_time_s"]} s, max |theta - pi| over the last 3 s {err[last].max():.2f} rad')
+    assert m['swing_up_time_s'] is not None and m['swing_up_time_s'] < 8.0, (m, v.timing())
+    assert err[last].max() < 0.2, f'balanced over the last 3 s ({v.timing()})'
