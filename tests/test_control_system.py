@@ -30,6 +30,9 @@ from rwpend_bag.reader import read_bag
 from rwpend_model.plant import Plant
 from rwpend_model.rig import load_rig
 
+#: its outcome does not depend on the host keeping a sample rate: make test runs it beside another
+pytestmark = pytest.mark.parallel
+
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
 RIG = load_rig()           # the rig YAML the stack loads (no overrides in these runs)

@@ -38,7 +38,9 @@ TOLERANCE = {'a': 0.002, 'b_p': 0.03, 'b_r': 0.01, 'omega_p': 0.001, 'omega_p_st
              'friction_viscous_neg': 0.02, 'friction_breakaway': 0.02, 'motor_time_constant': 0.05,
              'pendulum_energy_time_constant': 0.02, 'm_p': 0.03, 'j_p': 0.1, 'j_r': 0.01}
 
-pytestmark = pytest.mark.timeout(900)
+#: parallel: its outcome does not depend on the host keeping a sample rate (make test runs it
+#: beside another)
+pytestmark = [pytest.mark.timeout(900), pytest.mark.parallel]
 
 
 @pytest.fixture(scope='module')

@@ -20,6 +20,10 @@ from test_safety_system import diagnostics
 from test_stack_system import RWPEND, series
 
 from rwpend_bringup.verdict import EXIT_SHORT_BAG
+import pytest
+
+#: its outcome does not depend on the host keeping a sample rate: make test runs it beside another
+pytestmark = pytest.mark.parallel
 
 
 def recorder_pid(bag: Path, timeout: float = 60.0) -> int:

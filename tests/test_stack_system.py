@@ -24,6 +24,9 @@ from rwpend_bag.logtime import leading_time_ns
 from rwpend_bag.analysis import _decode
 from rwpend_bag.reader import read_bag
 
+#: its outcome does not depend on the host keeping a sample rate: make test runs it beside another
+pytestmark = pytest.mark.parallel
+
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
 
