@@ -12,6 +12,9 @@ import pytest
 from rwpend_bag.reader import read_bag
 from rwpend_lab.data import load_run
 
+#: its outcome does not depend on the host keeping a sample rate: make test runs it beside another
+pytestmark = pytest.mark.parallel
+
 ROOT = Path(__file__).resolve().parents[1]
 RWPEND = str(ROOT / 'rwpend')
 

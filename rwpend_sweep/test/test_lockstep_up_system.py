@@ -16,6 +16,9 @@ from rwpend_sweep.build import prepare
 from rwpend_sweep.run import samples_of
 from rwpend_sweep.spec import study_from_dict
 
+#: its outcome does not depend on the host keeping a sample rate: make test runs it beside another
+pytestmark = pytest.mark.parallel
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
