@@ -73,7 +73,7 @@ def test_bench_runs_and_writes_json(tmp_path, ros_env):
 
 
 @pytest.mark.timeout(150)
-def test_bench_control_layout_in_real_time_loses_nothing(tmp_path, ros_env):
+def test_bench_control_layout_in_real_time_reports_every_loss(tmp_path, ros_env):
     """The control layout in real time (the only run that exercises it there): the estimator
     and the controller as the loop of their process, one step per ``encoders`` message
     (rwpend_loop.control), the plant in its own. It answers its samples, and its bag tells the
