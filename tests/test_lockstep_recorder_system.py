@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from mcap_rules import assert_log_time_order
 from rwpend_bag import sameness
@@ -20,7 +21,6 @@ from test_safety_system import diagnostics
 from test_stack_system import RWPEND, series
 
 from rwpend_bringup.verdict import EXIT_SHORT_BAG
-import pytest
 
 #: its outcome does not depend on the host keeping a sample rate: make test runs it beside another
 pytestmark = pytest.mark.parallel

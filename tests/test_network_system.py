@@ -341,10 +341,11 @@ def first_pendulum_counts(bag_dir, ns: str) -> tuple[int, int]:
 
 #: Seconds the rigs keep running after an e-stop before they are stopped: three heartbeats of
 #: Fast DDS's reliable writers (every 3 s; after two, a slow host's three-rig run had recorded
-#: only the first estop/state of the rig it stopped). A recorder on a loaded host drops datagrams at its socket
-#: (these bags lose a third of the samples); a latched estop/state lost that way is sent again
-#: only after a heartbeat, and never once its writer is gone. A CI run stopped the rigs 1 s after
-#: the e-stop, and /rigb's bag held only its first estop/state (False), the likely cause.
+#: only the first estop/state of the rig it stopped). A recorder on a loaded host drops datagrams
+#: at its socket (these bags lose a third of the samples); a latched estop/state lost that way
+#: is sent again only after a heartbeat, and never once its writer is gone. A CI run stopped the
+#: rigs 1 s after the e-stop, and /rigb's bag held only its first estop/state (False), the likely
+#: cause.
 AFTER_ESTOP_S = 9.5
 
 
