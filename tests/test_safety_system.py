@@ -163,10 +163,12 @@ class DiagWatch:
                     self.cv.notify_all()
 
     def wait(self, cond, timeout: float, what: str) -> dict:
-        """The first diagnostics values (from now on, in order) for which ``cond(values)`` holds."""
+        """The first diagnostics values received after this call (in order) for which
+        ``cond(values)`` holds: a report that came before it (e.g. ``estop`` False before the
+        e-stop was raised) never answers a later wait."""
         end = time.monotonic() + timeout
         with self.cv:
-            i = 0
+            i = len(self.seen)
             while True:
                 for v in self.seen[i:]:
                     if cond(v):
@@ -967,7 +969,8 @@ def test_estop_holds_the_plant_at_zero_until_cleared(tmp_path, ros_env):
         t_clear = time.time_ns()
         assert 'cleared' in rwpend(['estop', '--clear'], ros_env).stdout
         t_cleared = time.time_ns()
-        off = watch.wait(lambda v: v['estop'] == 'False', 30, 'the clear reported')
+        off = watch.wait(lambda v: v['estop'] == 'False' and int(v['samples']) > int(on['samples']), 30,
+                         'the clear reported')
         watch.wait(lambda v: int(v['samples']) >= int(off['samples']) + 1000, 30, '1 s after the clear')
     finally:
         watch.close()
@@ -994,7 +997,8 @@ def test_estop_holds_the_plant_at_zero_until_cleared(tmp_path, ros_env):
     assert m['estop_to_zero_samples'] <= 2, m
     # 20 ms (of sim time: 20 samples) off either end
     held = (log_ns > on[0] + 20_000_000) & (log_ns < off[0] - 20_000_000)
-    assert held.sum() > 200
+    m['samples_held'] = int(held.sum())
+    assert m['samples_held'] > 200, m
     assert np.all(truth['u_commanded'][held] == 0.0)
     jj = np.nonzero(held)[0]
     assert np.all(np.abs(truth['u_applied'][jj[5:]]) < 0.05)    # motor lag T_e = 0.5 ms
@@ -1005,7 +1009,8 @@ def test_estop_holds_the_plant_at_zero_until_cleared(tmp_path, ros_env):
     assert np.all(cmd['u'][sent] == 0.0)
     m['estop_samples'] = int(diag[-1][4]['estop_samples'])
     after = log_ns > off[0] + 20_000_000
-    assert after.sum() > 200 and np.all(truth['u_commanded'][after] == 0.0)
+    m['samples_after_clear'] = int(after.sum())
+    assert m['samples_after_clear'] > 200 and np.all(truth['u_commanded'][after] == 0.0), m
     print('measured:', json.dumps(m), 'seq', int(seq[k_on]))
 
 
