@@ -19,10 +19,19 @@ from .bags import METRICS, PLOT
 RECORDER_GRACE_S = 15.0
 
 
+def default_sigint() -> None:  # pragma: no cover - runs in the child
+    """SIGINT at its default in the child, as from a shell: a console started with SIGINT
+    ignored (a background job of a script, ``./rwpend console &``) would pass that on, and a
+    Python child that starts with SIGINT ignored never raises KeyboardInterrupt -- the lab run
+    stopped by SIGINT to its group then ran on until the SIGTERM after STOP_GRACE_S."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def ordinary_priority() -> None:  # pragma: no cover - runs in the child
     """A stack of its own (a lab run) is no batch work: ordinary scheduling, as from a shell
     (not the console's real-time priority; at nice 10 a lab run's recorder fell behind on a
-    loaded host and the experiment's quantities came out wrong)."""
+    loaded host and the experiment's quantities came out wrong); SIGINT at its default."""
+    default_sigint()
     try:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (OSError, AttributeError):
@@ -30,7 +39,9 @@ def ordinary_priority() -> None:  # pragma: no cover - runs in the child
 
 
 def batch_priority() -> None:  # pragma: no cover - runs in the child
-    """An analysis is batch work: ordinary scheduling (not the console's real-time priority), nice 10."""
+    """An analysis is batch work: ordinary scheduling (not the console's real-time priority), nice
+    10; SIGINT at its default."""
+    default_sigint()
     try:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (OSError, AttributeError):

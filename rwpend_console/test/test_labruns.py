@@ -1,13 +1,14 @@
 """Lab experiments from the page (rwpend_console.labruns and the app's requests): a stand-in for
 the lab runner, no ROS."""
 import json
+import signal
 import sys
 import time
 
 import pytest
 
 from rwpend_console.app import ConsoleApp, RequestError
-from rwpend_console.labruns import LabRuns, check_run_name, lab_domain
+from rwpend_console.labruns import STOP_GRACE_S, LabRuns, check_run_name, lab_domain
 
 # writes what the lab runner writes: a line of log, results.json, report.html (or sleeps)
 STANDIN = r'''
@@ -84,6 +85,20 @@ def test_one_run_at_a_time_and_stop(lab):
     assert lab.start(2)['ok'], 'the next one starts once it stopped'
     wait_done(lab)
     assert [x['passed'] for x in lab.state()['runs'] if x['experiment'] == 2] == [False]
+
+
+def test_a_run_stops_at_sigint_even_when_the_console_ignores_it(lab):
+    """A console started with SIGINT ignored (a script's background job) starts its runs with
+    SIGINT at its default: stop() ends a run at once, not at the SIGTERM after STOP_GRACE_S."""
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        r = lab.start(3)                # the stand-in sleeps 60 s
+    finally:
+        signal.signal(signal.SIGINT, old)
+    time.sleep(0.5)                     # the stand-in's Python is up
+    t0 = time.monotonic()
+    assert lab.stop(r['run'])['exit'] == -signal.SIGINT
+    assert time.monotonic() - t0 < STOP_GRACE_S / 3
 
 
 def test_unknown_experiments_are_refused(lab):
