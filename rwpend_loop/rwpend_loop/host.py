@@ -136,8 +136,10 @@ def build_loop_nodes(names: list[str], lock: LoopLock, plant_here: bool = True) 
 def tap_publishers(taps, put) -> dict:
     """Wrap the publishers ``taps`` = [(node or None, attribute names)] of hosted nodes in a
     :class:`RecordingPublisher` (``put``: into the bag, None: not recorded); returns {topic:
-    (type name, offered QoS)} for the recorder."""
-    from rwpend_bag.recorder_node import qos_dict
+    (type name, offered QoS)} for the recorder ({} when not recorded: the recorder's modules
+    are then not imported)."""
+    if put is not None:
+        from rwpend_bag.recorder_node import qos_dict
     topics = {}
     for node, attrs in taps:
         if node is None:
@@ -146,9 +148,10 @@ def tap_publishers(taps, put) -> dict:
             pub = getattr(node, attr, None)
             if pub is None:
                 continue
-            msg_type = pub.msg_type
-            type_name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
-            topics[pub.topic_name] = (type_name, [qos_dict(pub.qos_profile)])
+            if put is not None:
+                msg_type = pub.msg_type
+                type_name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
+                topics[pub.topic_name] = (type_name, [qos_dict(pub.qos_profile)])
             setattr(node, attr, RecordingPublisher(pub, put))
     return topics
 
@@ -298,8 +301,13 @@ class Host:
             with self.lock.lock:
                 self.sim.finish()
                 self.finished = True
+            if self.wake is not None:
+                self.wake()
 
     finished = False
+    #: called once the run has finished (main: the executor's ``wake``, so its spin ends now,
+    #: not at the end of its wait: 0-100 ms of every run's wall time)
+    wake = None
 
     def _sample(self, k: int, stamp_ns: int, behind=None) -> bool:
         """Lock held: sample k through the loop, then published; False when the run is done."""
@@ -586,6 +594,7 @@ def main(argv=None) -> int:
         for node in host.nodes:
             executor.add_node(node)
         freeze_gc()
+        host.wake = getattr(executor, 'wake', None)
         host.start()
         spin_executor(executor, until=lambda: stop.is_set() or host.finished)
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -57,6 +57,17 @@ def test_bad_params_file(tmp_path):
     f.write_text('[unclosed\n')
     with pytest.raises(ValueError, match='cannot read'):
         read_params_file(f)
+    # libyaml's refusal is reported with the pure-Python loader's message: the line and a caret
+    f.write_text('a:\n  ros__parameters:\n    x: 1\n     y: 2\n')
+    with pytest.raises(ValueError, match=r'line 4, column 7:\n\s+y: 2\n\s+\^'):
+        read_params_file(f)
+
+
+def test_load_yaml_is_yaml_safe_load():
+    import yaml
+    from rwpend_model.rig import default_rig_file, load_yaml
+    for text in (default_rig_file().read_text(), 'x: 1e3\ny: .5\nz: 0x10\nw: yes\nv: ~\nu: [1, {a: b}]\n', '', '- 1\n'):
+        assert load_yaml(text) == yaml.safe_load(text)
 
 
 def test_energy_conserved_without_friction():
