@@ -302,7 +302,10 @@ class Host:
                 self.sim.finish()
                 self.finished = True
             if self.wake is not None:
-                self.wake()
+                try:
+                    self.wake()
+                except Exception:  # noqa: BLE001 - the executor already gone (SIGINT): none to wake
+                    pass
 
     finished = False
     #: called once the run has finished (main: the executor's ``wake``, so its spin ends now,
