@@ -20,8 +20,9 @@ demo: setup
 # domain ids and tmp dirs); the system tests marked ``parallel`` (lockstep and services: no sample
 # rate to keep) two files at once (on the slowest host 6 of those files took 217 s, 311 s one at a
 # time); then the rest one at a time: real-time, network and browser tests keep their margins for
-# one test on a loaded 2-core host (the whole system tier two at a time missed a real-time margin in 1 run of
-# 3, and the identification through the emulated rig recorded incomplete runs); fails if any fails
+# one test on a loaded 2-core host (the whole system tier two at a time missed a real-time margin
+# in 1 run of 3, and the identification through the emulated rig recorded incomplete runs); fails
+# if any fails
 test: setup-browser setup-cluster
 	@./rwpend exec python -m pytest -m "unit or loop" -n 2; fast=$$?; \
 	./rwpend exec python -m pytest -m "system and parallel" -n 2 --dist loadfile; two=$$?; \

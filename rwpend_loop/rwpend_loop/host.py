@@ -138,22 +138,15 @@ def tap_publishers(taps, put) -> dict:
     :class:`RecordingPublisher` (``put``: into the bag, None: not recorded); returns {topic:
     (type name, offered QoS)} for the recorder ({} when not recorded: the recorder's modules
     are then not imported)."""
-    if put is not None:
-        from rwpend_bag.recorder_node import qos_dict
-    topics = {}
-    for node, attrs in taps:
-        if node is None:
-            continue
-        for attr in attrs:
-            pub = getattr(node, attr, None)
-            if pub is None:
-                continue
-            if put is not None:
-                msg_type = pub.msg_type
-                type_name = f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
-                topics[pub.topic_name] = (type_name, [qos_dict(pub.qos_profile)])
-            setattr(node, attr, RecordingPublisher(pub, put))
-    return topics
+    pubs = [(node, attr, pub) for node, attrs in taps if node is not None for attr in attrs
+            if (pub := getattr(node, attr, None)) is not None]
+    for node, attr, pub in pubs:
+        setattr(node, attr, RecordingPublisher(pub, put))
+    if put is None:
+        return {}
+    from rwpend_bag.recorder_node import qos_dict
+    return {pub.topic_name: (f'{pub.msg_type.__module__.split(".")[0]}/msg/{pub.msg_type.__name__}',
+                             [qos_dict(pub.qos_profile)]) for _, _, pub in pubs}
 
 
 class Host:
